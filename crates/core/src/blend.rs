@@ -1,0 +1,101 @@
+//! The blend stage's formulas (paper listing 10, eq. 4–6) and the closest-hit combination of
+//! listing 8c, which is the same average of eq. 5 and 6.
+
+use glam::Vec3;
+
+/// Eq. 5/6 averaged: reflection `m` with weight `reflectivity` (OM) and refraction `r` with
+/// weight `transparency` (OR = 1 − opacity) over the base colour `c`.
+///
+/// CM = OM·M + (1 − OM)(OR·R + (1 − OR)·C);  CR = OR·R + (1 − OR)(OM·M + (1 − OM)·C);
+/// result = (CM + CR) / 2.
+#[inline]
+pub fn combine(c: Vec3, m: Vec3, r: Vec3, reflectivity: f32, transparency: f32) -> Vec3 {
+    let (om, or) = (reflectivity, transparency);
+    let cm = om * m + (1.0 - om) * (or * r + (1.0 - or) * c);
+    let cr = or * r + (1.0 - or) * (om * m + (1.0 - om) * c);
+    (cm + cr) * 0.5
+}
+
+/// Eq. 4: lighting with shadows, C = L − (1 − S).
+#[inline]
+pub fn apply_shadow(lighting: Vec3, shadow: Vec3) -> Vec3 {
+    lighting - (Vec3::ONE - shadow)
+}
+
+/// Threshold below which a mask value means "not traced" (listing 10: `heurVal < 0.0001`).
+pub const MASK_EPSILON: f32 = 1e-4;
+
+/// One pixel of the blend stage (listing 10), linear in, linear out (sRGB encoding follows).
+/// `optical` is (reflectivity, IOR, opacity).
+#[inline]
+pub fn blend_pixel(lighting: Vec3, shadow: Vec3, reflection: Vec3, refraction: Vec3, optical: Vec3, mask: f32) -> Vec3 {
+    if mask < MASK_EPSILON {
+        return lighting;
+    }
+    let c = apply_shadow(lighting, shadow);
+    combine(c, reflection, refraction, optical.x, 1.0 - optical.z)
+}
+
+/// Linear colour → 8-bit sRGB (the blend stage's gamma correction).
+#[inline]
+pub fn encode_srgb(c: Vec3) -> [u8; 4] {
+    let e = |v: f32| (hybrid_scene::texture::linear_to_srgb(if v.is_finite() { v } else { 0.0 }) * 255.0 + 0.5) as u8;
+    [e(c.x), e(c.y), e(c.z), 255]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        (a - b).abs().max_element() < 1e-6
+    }
+
+    #[test]
+    fn unmasked_pixels_are_the_lighting() {
+        let l = Vec3::new(0.2, 0.4, 0.6);
+        assert_eq!(blend_pixel(l, Vec3::ZERO, Vec3::ONE, Vec3::ONE, Vec3::new(1.0, 1.5, 0.0), 0.0), l);
+    }
+
+    #[test]
+    fn opaque_diffuse_pixel_gets_only_its_shadow() {
+        // OM = 0, OR = 0 → CM = CR = C = L − (1 − S).
+        let l = Vec3::splat(0.8);
+        let s = Vec3::splat(0.7); // 0.3 of light blocked
+        let out = blend_pixel(l, s, Vec3::ONE, Vec3::ONE, Vec3::new(0.0, 1.0, 1.0), 1.0);
+        assert!(close(out, Vec3::splat(0.5)), "{out}");
+    }
+
+    #[test]
+    fn hand_computed_mixed_pixel() {
+        // OM = 0.5, OR = 0.25, C = 0.4, M = 1.0, R = 0.2 (one channel):
+        // CM = 0.5·1 + 0.5·(0.25·0.2 + 0.75·0.4) = 0.5 + 0.5·0.35 = 0.675
+        // CR = 0.25·0.2 + 0.75·(0.5·1 + 0.5·0.4) = 0.05 + 0.75·0.7 = 0.575
+        // final = 0.625
+        let out = combine(Vec3::splat(0.4), Vec3::ONE, Vec3::splat(0.2), 0.5, 0.25);
+        assert!(close(out, Vec3::splat(0.625)), "{out}");
+        // The same through blend_pixel: L = 0.4, S = 1 (no shadow), opacity 0.75.
+        let out = blend_pixel(Vec3::splat(0.4), Vec3::ONE, Vec3::ONE, Vec3::splat(0.2), Vec3::new(0.5, 1.5, 0.75), 1.0);
+        assert!(close(out, Vec3::splat(0.625)));
+    }
+
+    #[test]
+    fn perfect_mirror_and_perfect_glass() {
+        let c = Vec3::splat(0.3);
+        let m = Vec3::new(1.0, 0.0, 0.0);
+        let r = Vec3::new(0.0, 0.0, 1.0);
+        assert!(close(combine(c, m, r, 1.0, 0.0), m)); // mirror: CM = M, CR = M
+        assert!(close(combine(c, m, r, 0.0, 1.0), r)); // glass: CM = R, CR = R
+        // Both 1: CM = M, CR = R → average.
+        assert!(close(combine(c, m, r, 1.0, 1.0), (m + r) * 0.5));
+    }
+
+    #[test]
+    fn srgb_encoding_hand_values() {
+        assert_eq!(encode_srgb(Vec3::ZERO), [0, 0, 0, 255]);
+        assert_eq!(encode_srgb(Vec3::ONE), [255, 255, 255, 255]);
+        // sRGB code 128 decodes to 0.215861 linear; encoding it gives 128 back.
+        assert_eq!(encode_srgb(Vec3::splat(0.215_861)), [128, 128, 128, 255]);
+        assert_eq!(encode_srgb(Vec3::splat(f32::NAN)), [0, 0, 0, 255]);
+    }
+}

@@ -1,0 +1,148 @@
+//! The frame's buffers (DESIGN §2, paper Table 2), as plain row-major arrays (row 0 at the top).
+//! The CPU backend writes them directly; the GPU backend reads its textures back into them for
+//! dumps and tests, so both are compared buffer by buffer.
+
+use glam::{Vec3, Vec4};
+
+/// Object id of pixels no object covers (sky).
+pub const NO_OBJECT: u32 = u32::MAX;
+
+/// What the G-buffer holds for one covered pixel: everything the lighting, trace and blend
+/// stages need about the visible surface (no primary rays needed).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Surface {
+    /// World position.
+    pub position: Vec3,
+    /// World shading normal (normal-mapped, unit length) as the mesh orients it. Lighting flips it
+    /// towards the viewer; refraction uses its side to tell entering from leaving.
+    pub normal: Vec3,
+    pub emission: Vec3,
+    pub ambient: Vec3,
+    /// Linear diffuse colour (material × texture × vertex colour).
+    pub diffuse: Vec3,
+    /// 1 = opaque, 0 = fully transparent.
+    pub opacity: f32,
+    pub specular: Vec3,
+    /// 0..1 (exponent 1..255, see `hybrid_scene::specular_exponent`).
+    pub shininess: f32,
+    pub reflectivity: f32,
+    pub ior: f32,
+}
+
+/// The G-buffer of DESIGN §2: one entry per pixel in every target.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GBuffer {
+    pub width: u32,
+    pub height: u32,
+    pub position: Vec<Vec3>,
+    /// Zero vector where nothing is drawn (listing 8a tests for it).
+    pub normal: Vec<Vec3>,
+    pub emission: Vec<Vec3>,
+    pub ambient: Vec<Vec3>,
+    /// RGB diffuse, A opacity.
+    pub diffuse: Vec<Vec4>,
+    /// RGB specular, A shininess (0..1).
+    pub specular: Vec<Vec4>,
+    /// Reflectivity, IOR, opacity.
+    pub optical: Vec<Vec3>,
+    /// Which object covers the pixel; [`NO_OBJECT`] for none.
+    pub object_id: Vec<u32>,
+    /// Heuristic mask: > 0 = ray trace this pixel.
+    pub mask: Vec<f32>,
+    /// Reversed-Z depth: near 1, far 0, 0 where nothing is drawn.
+    pub depth: Vec<f32>,
+}
+
+impl GBuffer {
+    /// A cleared G-buffer: no object anywhere, depth 0 (the far plane), mask 0.
+    pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            position: vec![Vec3::ZERO; n],
+            normal: vec![Vec3::ZERO; n],
+            emission: vec![Vec3::ZERO; n],
+            ambient: vec![Vec3::ZERO; n],
+            diffuse: vec![Vec4::ZERO; n],
+            specular: vec![Vec4::ZERO; n],
+            optical: vec![Vec3::ZERO; n],
+            object_id: vec![NO_OBJECT; n],
+            mask: vec![0.0; n],
+            depth: vec![0.0; n],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.object_id.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.object_id.is_empty()
+    }
+
+    /// The surface at pixel `i`, or `None` where no object is drawn.
+    #[inline]
+    pub fn surface(&self, i: usize) -> Option<Surface> {
+        if self.object_id[i] == NO_OBJECT {
+            return None;
+        }
+        let (d, s, o) = (self.diffuse[i], self.specular[i], self.optical[i]);
+        Some(Surface {
+            position: self.position[i],
+            normal: self.normal[i],
+            emission: self.emission[i],
+            ambient: self.ambient[i],
+            diffuse: d.truncate(),
+            opacity: d.w,
+            specular: s.truncate(),
+            shininess: s.w,
+            reflectivity: o.x,
+            ior: o.y,
+        })
+    }
+
+    /// Writes `surface` (covered by `object_id` at reversed-Z `depth`) into pixel `i`.
+    #[inline]
+    pub fn write(&mut self, i: usize, object_id: u32, depth: f32, s: &Surface) {
+        self.position[i] = s.position;
+        self.normal[i] = s.normal;
+        self.emission[i] = s.emission;
+        self.ambient[i] = s.ambient;
+        self.diffuse[i] = s.diffuse.extend(s.opacity);
+        self.specular[i] = s.specular.extend(s.shininess);
+        self.optical[i] = Vec3::new(s.reflectivity, s.ior, s.opacity);
+        self.object_id[i] = object_id;
+        self.depth[i] = depth;
+    }
+}
+
+/// Stage outputs after the G-buffer: the P-buffer (lighting), the trace stage's three buffers
+/// (paper Fig. 5) and the final image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameBuffers {
+    pub width: u32,
+    pub height: u32,
+    /// Deferred Blinn–Phong result (linear). Sky pixels hold the skybox colour.
+    pub lighting: Vec<Vec3>,
+    /// 1 minus the light blocked from each shadow-casting light (listing 8a), linear.
+    pub shadow: Vec<Vec3>,
+    pub reflection: Vec<Vec3>,
+    pub refraction: Vec<Vec3>,
+    /// Final image, sRGB-encoded 8-bit RGBA (alpha 255).
+    pub final_srgb: Vec<[u8; 4]>,
+}
+
+impl FrameBuffers {
+    pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            lighting: vec![Vec3::ZERO; n],
+            shadow: vec![Vec3::ONE; n],
+            reflection: vec![Vec3::ZERO; n],
+            refraction: vec![Vec3::ZERO; n],
+            final_srgb: vec![[0, 0, 0, 255]; n],
+        }
+    }
+}

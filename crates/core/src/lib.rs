@@ -1,0 +1,12 @@
+//! `hybrid-core`: what every backend shares — the frame's modes and settings, the buffers of
+//! DESIGN §2, the shading and blend formulas of paper 1 (listings 5, 8, 10), the depth synthesis
+//! and packing of paper 2, and the per-frame report. Backends implement the stages; the maths
+//! they must agree on lives here, once.
+
+pub mod blend;
+pub mod buffers;
+pub mod frame;
+pub mod shading;
+
+pub use buffers::{FrameBuffers, GBuffer, Surface};
+pub use frame::{FrameSettings, Mode};

@@ -1,0 +1,276 @@
+//! Shading shared by every stage and backend: Blinn–Phong for the three light kinds (paper
+//! listing 5), the skybox, and the reflection/refraction directions (listing 8a/8c).
+
+use glam::{Vec2, Vec3};
+use hybrid_scene::texture::Texture;
+use hybrid_scene::{DirectionalLight, Environment, Lights, PointLight, Skybox, SpotLight, specular_exponent};
+
+use crate::buffers::Surface;
+
+/// Rec. 709 luminance of a linear colour.
+pub fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
+/// One light of any kind.
+#[derive(Debug, Clone, Copy)]
+pub enum Light<'a> {
+    Directional(&'a DirectionalLight),
+    Point(&'a PointLight),
+    Spot(&'a SpotLight),
+}
+
+/// Every light in the order directional, point, spot (the order of listings 5 and 8a).
+pub fn lights(l: &Lights) -> impl Iterator<Item = Light<'_>> {
+    l.directional
+        .iter()
+        .map(Light::Directional)
+        .chain(l.point.iter().map(Light::Point))
+        .chain(l.spot.iter().map(Light::Spot))
+}
+
+impl Light<'_> {
+    pub fn casts_shadows(&self) -> bool {
+        match self {
+            Light::Directional(l) => l.casts_shadows,
+            Light::Point(l) => l.casts_shadows,
+            Light::Spot(l) => l.casts_shadows,
+        }
+    }
+
+    /// Unit direction from `p` towards the light and the distance to it (∞ for directional):
+    /// a shadow ray from `p` along the direction up to that distance.
+    #[inline]
+    pub fn direction_from(&self, p: Vec3) -> (Vec3, f32) {
+        match self {
+            Light::Directional(l) => (-l.direction, f32::INFINITY),
+            Light::Point(l) => to_position(p, l.position),
+            Light::Spot(l) => to_position(p, l.position),
+        }
+    }
+
+    /// Radiance arriving at `p` from this light (colour × intensity × attenuation × cone),
+    /// with the direction towards the light.
+    #[inline]
+    pub fn incident(&self, p: Vec3) -> (Vec3, Vec3) {
+        match self {
+            Light::Directional(l) => (-l.direction, l.color * l.intensity),
+            Light::Point(l) => {
+                let (dir, d) = to_position(p, l.position);
+                (dir, l.color * l.intensity * l.attenuation.factor(d))
+            }
+            Light::Spot(l) => {
+                let (dir, d) = to_position(p, l.position);
+                let cos = (-dir).dot(l.direction);
+                let cone = spot_cone(cos, l.inner_angle.cos(), l.outer_angle.cos());
+                (dir, l.color * l.intensity * l.attenuation.factor(d) * cone)
+            }
+        }
+    }
+
+    /// Blinn–Phong contribution of this light to `s` seen along `view` (unit, from the surface
+    /// towards the viewer). Unshadowed.
+    #[inline]
+    pub fn blinn_phong(&self, s: &Surface, view: Vec3) -> Vec3 {
+        let (l, radiance) = self.incident(s.position);
+        if radiance == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        let n = facing(s.normal, view);
+        let n_dot_l = n.dot(l);
+        if n_dot_l <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let h = (l + view).normalize_or_zero();
+        let spec = if s.specular == Vec3::ZERO {
+            Vec3::ZERO
+        } else {
+            s.specular * n.dot(h).max(0.0).powf(specular_exponent(s.shininess))
+        };
+        (s.diffuse * n_dot_l + spec) * radiance
+    }
+}
+
+fn to_position(p: Vec3, light: Vec3) -> (Vec3, f32) {
+    let d = light - p;
+    let len = d.length();
+    if len > 0.0 { (d / len, len) } else { (Vec3::Y, 0.0) }
+}
+
+/// Spot cone falloff: 1 inside the inner cone, 0 outside the outer, smoothstep in between.
+pub fn spot_cone(cos_angle: f32, cos_inner: f32, cos_outer: f32) -> f32 {
+    if cos_inner <= cos_outer {
+        return if cos_angle >= cos_outer { 1.0 } else { 0.0 };
+    }
+    let t = ((cos_angle - cos_outer) / (cos_inner - cos_outer)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// The normal flipped, if needed, to the viewer's side (so open surfaces light from both sides).
+#[inline]
+pub fn facing(n: Vec3, view: Vec3) -> Vec3 {
+    if n.dot(view) < 0.0 { -n } else { n }
+}
+
+/// Listing 5: `emission + env_ambient · ambient + Σ lights Blinn–Phong`, unshadowed.
+pub fn local_lighting(s: &Surface, view: Vec3, all: &Lights, env: &Environment) -> Vec3 {
+    let mut c = s.emission + env.ambient * s.ambient;
+    for light in lights(all) {
+        c += light.blinn_phong(s, view);
+    }
+    c
+}
+
+/// Mirror reflection of incident direction `i` about normal `n` (GLSL `reflect`).
+#[inline]
+pub fn reflect(i: Vec3, n: Vec3) -> Vec3 {
+    i - 2.0 * n.dot(i) * n
+}
+
+/// Refraction of unit incident direction `i` at a surface with normal `n` (either side),
+/// between the environment (`env_ior`) and the material (`mat_ior`): entering when `i` goes
+/// against `n`, leaving otherwise. `None` on total internal reflection.
+#[inline]
+pub fn refract(i: Vec3, n: Vec3, env_ior: f32, mat_ior: f32) -> Option<Vec3> {
+    let (n, eta) = if i.dot(n) < 0.0 { (n, env_ior / mat_ior) } else { (-n, mat_ior / env_ior) };
+    let cos_i = -n.dot(i);
+    let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+    if k < 0.0 {
+        None
+    } else {
+        Some((eta * i + (eta * cos_i - k.sqrt()) * n).normalize())
+    }
+}
+
+/// Refraction direction with the paper's fallback: the reflected direction on total internal
+/// reflection (listing 8a/8c). Returns the direction and whether TIR happened.
+#[inline]
+pub fn refract_or_reflect(i: Vec3, n: Vec3, env_ior: f32, mat_ior: f32) -> (Vec3, bool) {
+    match refract(i, n, env_ior, mat_ior) {
+        Some(t) => (t, false),
+        None => (reflect(i, n), true),
+    }
+}
+
+/// Linear skybox radiance seen along unit direction `dir` (listing 8d).
+pub fn sky(env: &Environment, textures: &[Texture], dir: Vec3) -> Vec3 {
+    match &env.skybox {
+        Skybox::Color(c) => *c,
+        Skybox::Gradient { zenith, horizon, ground } => {
+            let y = dir.normalize_or_zero().y.clamp(-1.0, 1.0);
+            if y >= 0.0 { horizon.lerp(*zenith, y) } else { horizon.lerp(*ground, -y) }
+        }
+        Skybox::Cube { faces } => {
+            let (face, uv) = cube_face_uv(dir);
+            textures[faces[face]].sample(uv, 0.0).truncate()
+        }
+    }
+}
+
+/// Cube-map face (+X, −X, +Y, −Y, +Z, −Z) and its UV ((0,0) top-left) for a direction, in the
+/// OpenGL cube-map convention.
+pub fn cube_face_uv(d: Vec3) -> (usize, Vec2) {
+    let a = d.abs();
+    let (face, sc, tc, ma) = if a.x >= a.y && a.x >= a.z {
+        if d.x > 0.0 { (0, -d.z, -d.y, a.x) } else { (1, d.z, -d.y, a.x) }
+    } else if a.y >= a.z {
+        if d.y > 0.0 { (2, d.x, d.z, a.y) } else { (3, d.x, -d.z, a.y) }
+    } else if d.z > 0.0 {
+        (4, d.x, -d.y, a.z)
+    } else {
+        (5, -d.x, -d.y, a.z)
+    };
+    let ma = if ma > 0.0 { ma } else { 1.0 };
+    (face, Vec2::new(0.5 * (sc / ma + 1.0), 0.5 * (tc / ma + 1.0)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hybrid_scene::Attenuation;
+
+    fn surface() -> Surface {
+        Surface {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            diffuse: Vec3::splat(0.5),
+            opacity: 1.0,
+            ior: 1.0,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn point_light_diffuse_hand_value() {
+        // Light 2 m straight above, intensity 4, attenuation 1/d² → radiance 1.
+        // Lambert: 0.5 · cos 0 · 1 = 0.5.
+        let l = PointLight {
+            position: Vec3::new(0.0, 2.0, 0.0),
+            color: Vec3::ONE,
+            intensity: 4.0,
+            attenuation: Attenuation { constant: 0.0, linear: 0.0, quadratic: 1.0 },
+            casts_shadows: true,
+        };
+        let c = Light::Point(&l).blinn_phong(&surface(), Vec3::Y);
+        assert!((c - Vec3::splat(0.5)).abs().max_element() < 1e-6, "{c}");
+        // At 60° incidence from 2 m away: 0.5 · 0.5 · 1 = 0.25.
+        let l2 = PointLight { position: Vec3::new(3f32.sqrt(), 1.0, 0.0), ..l };
+        let c = Light::Point(&l2).blinn_phong(&surface(), Vec3::Y);
+        assert!((c.x - 0.25).abs() < 1e-6, "{c}");
+    }
+
+    #[test]
+    fn specular_hand_value() {
+        // Light and viewer both along the normal: H = N, n·h = 1 → spec = specular colour.
+        let l = DirectionalLight { direction: -Vec3::Y, color: Vec3::ONE, intensity: 1.0, casts_shadows: true };
+        let s = Surface { diffuse: Vec3::ZERO, specular: Vec3::splat(0.3), shininess: 1.0, ..surface() };
+        let c = Light::Directional(&l).blinn_phong(&s, Vec3::Y);
+        assert!((c.x - 0.3).abs() < 1e-6);
+        // Viewer at 90° from the light in the plane: h at 45°, cos 45° ^ 255 ≈ 0.
+        let v = Vec3::X;
+        let c = Light::Directional(&l).blinn_phong(&s, v);
+        assert!(c.x < 1e-6);
+        // Exponent 1 (shininess 0): (cos 45°)^1 · 0.3.
+        let s1 = Surface { shininess: 0.0, ..s };
+        let c = Light::Directional(&l).blinn_phong(&s1, (Vec3::X + Vec3::Y).normalize());
+        let h = (Vec3::Y + (Vec3::X + Vec3::Y).normalize()).normalize();
+        assert!((c.x - 0.3 * h.y).abs() < 1e-6);
+    }
+
+    #[test]
+    fn spot_cone_inside_outside_between() {
+        let ci = 20f32.to_radians().cos();
+        let co = 30f32.to_radians().cos();
+        assert_eq!(spot_cone(10f32.to_radians().cos(), ci, co), 1.0);
+        assert_eq!(spot_cone(40f32.to_radians().cos(), ci, co), 0.0);
+        let mid = spot_cone(25f32.to_radians().cos(), ci, co);
+        assert!(mid > 0.0 && mid < 1.0);
+    }
+
+    #[test]
+    fn refraction_snell_and_tir() {
+        // 45° into glass (1 → 1.5): sin t = sin 45° / 1.5.
+        let i = Vec3::new(1.0, -1.0, 0.0).normalize();
+        let t = refract(i, Vec3::Y, 1.0, 1.5).unwrap();
+        assert!((t.x - (45f32.to_radians().sin() / 1.5)).abs() < 1e-6);
+        assert!(t.y < 0.0);
+        // Leaving glass at 45° (1.5 → 1): sin t = 1.06 > 1 → TIR.
+        let inside = Vec3::new(1.0, 1.0, 0.0).normalize();
+        assert!(refract(inside, Vec3::Y, 1.0, 1.5).is_none());
+        let (d, tir) = refract_or_reflect(inside, Vec3::Y, 1.0, 1.5);
+        assert!(tir && (d - Vec3::new(1.0, -1.0, 0.0).normalize()).length() < 1e-6);
+        // IOR 1 changes nothing.
+        assert!((refract(i, Vec3::Y, 1.0, 1.0).unwrap() - i).length() < 1e-6);
+    }
+
+    #[test]
+    fn cube_faces_point_the_right_way() {
+        assert_eq!(cube_face_uv(Vec3::X).0, 0);
+        assert_eq!(cube_face_uv(-Vec3::X).0, 1);
+        assert_eq!(cube_face_uv(Vec3::Y).0, 2);
+        assert_eq!(cube_face_uv(-Vec3::Y).0, 3);
+        assert_eq!(cube_face_uv(Vec3::Z).0, 4);
+        assert_eq!(cube_face_uv(-Vec3::Z).0, 5);
+        assert!((cube_face_uv(Vec3::X).1 - Vec2::splat(0.5)).length() < 1e-6);
+    }
+}

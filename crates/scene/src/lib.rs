@@ -1,0 +1,20 @@
+//! `hybrid-scene`: the scene model of the hybrid renderer, its TOML scene files, and the loaders
+//! for models (glTF 2.0, OBJ+MTL, PLY), point clouds (PLY, LAS/LAZ) and textures (PNG, JPEG).
+//!
+//! Nothing here depends on a GPU API: a CPU-only user loads scenes without compiling wgpu.
+
+pub mod camera;
+pub mod error;
+pub mod file;
+pub mod load;
+pub mod model;
+pub mod primitives;
+pub mod stats;
+pub mod texture;
+
+pub use camera::{Camera, CameraPath, Keyframe, Projection};
+pub use error::SceneError;
+pub use file::{demo_scene, load_scene, parse_scene, DEMO_SCENE_TOML};
+pub use model::*;
+pub use stats::SceneStats;
+pub use texture::{ColorSpace, Texture, TextureId};
