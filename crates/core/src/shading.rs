@@ -22,11 +22,7 @@ pub enum Light<'a> {
 
 /// Every light in the order directional, point, spot (the order of listings 5 and 8a).
 pub fn lights(l: &Lights) -> impl Iterator<Item = Light<'_>> {
-    l.directional
-        .iter()
-        .map(Light::Directional)
-        .chain(l.point.iter().map(Light::Point))
-        .chain(l.spot.iter().map(Light::Spot))
+    l.directional.iter().map(Light::Directional).chain(l.point.iter().map(Light::Point)).chain(l.spot.iter().map(Light::Spot))
 }
 
 impl Light<'_> {
@@ -82,11 +78,7 @@ impl Light<'_> {
             return Vec3::ZERO;
         }
         let h = (l + view).normalize_or_zero();
-        let spec = if s.specular == Vec3::ZERO {
-            Vec3::ZERO
-        } else {
-            s.specular * n.dot(h).max(0.0).powf(specular_exponent(s.shininess))
-        };
+        let spec = if s.specular == Vec3::ZERO { Vec3::ZERO } else { s.specular * n.dot(h).max(0.0).powf(specular_exponent(s.shininess)) };
         (s.diffuse * n_dot_l + spec) * radiance
     }
 }
@@ -135,11 +127,7 @@ pub fn refract(i: Vec3, n: Vec3, env_ior: f32, mat_ior: f32) -> Option<Vec3> {
     let (n, eta) = if i.dot(n) < 0.0 { (n, env_ior / mat_ior) } else { (-n, mat_ior / env_ior) };
     let cos_i = -n.dot(i);
     let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
-    if k < 0.0 {
-        None
-    } else {
-        Some((eta * i + (eta * cos_i - k.sqrt()) * n).normalize())
-    }
+    if k < 0.0 { None } else { Some((eta * i + (eta * cos_i - k.sqrt()) * n).normalize()) }
 }
 
 /// Refraction direction with the paper's fallback: the reflected direction on total internal
@@ -190,14 +178,7 @@ mod tests {
     use hybrid_scene::Attenuation;
 
     fn surface() -> Surface {
-        Surface {
-            position: Vec3::ZERO,
-            normal: Vec3::Y,
-            diffuse: Vec3::splat(0.5),
-            opacity: 1.0,
-            ior: 1.0,
-            ..Default::default()
-        }
+        Surface { position: Vec3::ZERO, normal: Vec3::Y, diffuse: Vec3::splat(0.5), opacity: 1.0, ior: 1.0, ..Default::default() }
     }
 
     #[test]

@@ -25,11 +25,7 @@ impl Default for Camera {
             position: Vec3::new(0.0, 1.0, 5.0),
             target: Vec3::ZERO,
             up: Vec3::Y,
-            projection: Projection::Perspective {
-                fov_y_deg: 60.0,
-                near: 0.05,
-                far: 1000.0,
-            },
+            projection: Projection::Perspective { fov_y_deg: 60.0, near: 0.05, far: 1000.0 },
         }
     }
 }
@@ -208,10 +204,7 @@ mod tests {
 
     #[test]
     fn orthographic_reversed_z() {
-        let c = Camera {
-            projection: Projection::Orthographic { height: 4.0, near: 1.0, far: 11.0 },
-            ..cam()
-        };
+        let c = Camera { projection: Projection::Orthographic { height: 4.0, near: 1.0, far: 11.0 }, ..cam() };
         let p = c.projection(1.0);
         assert!((p.project_point3(Vec3::new(0.0, 0.0, -1.0)).z - 1.0).abs() < 1e-6);
         assert!(p.project_point3(Vec3::new(0.0, 0.0, -11.0)).z.abs() < 1e-6);

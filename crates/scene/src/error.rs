@@ -23,13 +23,7 @@ pub struct SceneError {
 
 impl SceneError {
     pub fn new(path: impl AsRef<Path>, message: impl Into<String>) -> Self {
-        Self {
-            path: path.as_ref().to_path_buf(),
-            location: None,
-            message: message.into(),
-            source_code: None,
-            span: None,
-        }
+        Self { path: path.as_ref().to_path_buf(), location: None, message: message.into(), source_code: None, span: None }
     }
 
     /// An error at byte range `span` of the text `source` of `path`; line and column are derived.

@@ -14,7 +14,7 @@ pub mod texture;
 
 pub use camera::{Camera, CameraPath, Keyframe, Projection};
 pub use error::SceneError;
-pub use file::{demo_scene, load_scene, parse_scene, DEMO_SCENE_TOML};
+pub use file::{DEMO_SCENE_TOML, demo_scene, load_scene, parse_scene};
 pub use model::*;
 pub use stats::SceneStats;
 pub use texture::{ColorSpace, Texture, TextureId};

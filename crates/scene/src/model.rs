@@ -45,11 +45,7 @@ pub struct Environment {
 
 impl Default for Environment {
     fn default() -> Self {
-        Self {
-            ambient: Vec3::splat(0.1),
-            ior: 1.0,
-            skybox: Skybox::Color(Vec3::ZERO),
-        }
+        Self { ambient: Vec3::splat(0.1), ior: 1.0, skybox: Skybox::Color(Vec3::ZERO) }
     }
 }
 
@@ -77,11 +73,7 @@ pub struct HeuristicSettings {
 
 impl Default for HeuristicSettings {
     fn default() -> Self {
-        Self {
-            budget: Budget::Unlimited,
-            importance: 1.0,
-            policy: Policy::Paper,
-        }
+        Self { budget: Budget::Unlimited, importance: 1.0, policy: Policy::Paper }
     }
 }
 
@@ -122,11 +114,7 @@ pub struct TraceSettings {
 
 impl Default for TraceSettings {
     fn default() -> Self {
-        Self {
-            max_depth: 10,
-            importance_cutoff: 0.01,
-            ray_bias: 1e-3,
-        }
+        Self { max_depth: 10, importance_cutoff: 0.01, ray_bias: 1e-3 }
     }
 }
 
@@ -215,11 +203,7 @@ pub struct Transform {
 
 impl Default for Transform {
     fn default() -> Self {
-        Self {
-            position: Vec3::ZERO,
-            rotation_deg: Vec3::ZERO,
-            scale: Vec3::ONE,
-        }
+        Self { position: Vec3::ZERO, rotation_deg: Vec3::ZERO, scale: Vec3::ONE }
     }
 }
 
@@ -349,19 +333,13 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
-        min: Vec3::splat(f32::INFINITY),
-        max: Vec3::splat(f32::NEG_INFINITY),
-    };
+    pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
     pub fn grow(&mut self, p: Vec3) {
         self.min = self.min.min(p);
         self.max = self.max.max(p);
     }
     pub fn union(&self, o: &Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-        }
+        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
     }
     pub fn is_empty(&self) -> bool {
         self.min.x > self.max.x
@@ -409,11 +387,7 @@ pub struct Attenuation {
 
 impl Default for Attenuation {
     fn default() -> Self {
-        Self {
-            constant: 1.0,
-            linear: 0.0,
-            quadratic: 1.0,
-        }
+        Self { constant: 1.0, linear: 0.0, quadratic: 1.0 }
     }
 }
 

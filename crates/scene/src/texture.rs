@@ -61,11 +61,7 @@ impl Texture {
             let next = downsample(last, color_space);
             levels.push(next);
         }
-        Self {
-            name: name.into(),
-            color_space,
-            levels,
-        }
+        Self { name: name.into(), color_space, levels }
     }
 
     /// A 1×1 texture of one colour (sRGB bytes if `color_space` is sRGB).
@@ -122,11 +118,7 @@ impl Texture {
         let l0 = lod.floor();
         let f = lod - l0;
         let a = self.sample_bilinear(uv, l0 as usize);
-        if f <= 1e-4 {
-            a
-        } else {
-            a.lerp(self.sample_bilinear(uv, l0 as usize + 1), f)
-        }
+        if f <= 1e-4 { a } else { a.lerp(self.sample_bilinear(uv, l0 as usize + 1), f) }
     }
 
     /// The level of detail for a UV footprint: `duv` is the change of UV per pixel (the larger
