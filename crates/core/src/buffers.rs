@@ -146,3 +146,24 @@ impl FrameBuffers {
         }
     }
 }
+
+/// Object id written where the RT-scene (the point-cloud capsule, paper 2) is the visible
+/// surface after the depth merge.
+pub const RT_SCENE_OBJECT: u32 = u32::MAX - 1;
+
+/// The capsule's frame after unpacking (paper 2, block U): linear colour and reversed-Z depth
+/// per pixel; `depth == 0.0` where the capsule drew nothing (alpha ≤ 0.1 was discarded).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RtLayer {
+    pub width: u32,
+    pub height: u32,
+    pub color: Vec<Vec3>,
+    pub depth: Vec<f32>,
+}
+
+impl RtLayer {
+    pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self { width, height, color: vec![Vec3::ZERO; n], depth: vec![0.0; n] }
+    }
+}

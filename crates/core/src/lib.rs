@@ -8,5 +8,5 @@ pub mod buffers;
 pub mod frame;
 pub mod shading;
 
-pub use buffers::{FrameBuffers, GBuffer, Surface};
+pub use buffers::{FrameBuffers, GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 pub use frame::{FrameSettings, Mode};
