@@ -1,1 +1,70 @@
-fn main() {}
+//! `hybrid`: the command-line front end of the hybrid renderer.
+//!
+//! ```text
+//! hybrid render [SCENE] [-o out.png] [--size WxH] [--mode M] [--backend B] [--dump DIR] [--report FILE.json] [--time S]
+//! hybrid inspect SCENE [--json]
+//! ```
+//! Bad input (scene files, models, flags) prints one clear error and exits with code 2.
+
+mod args;
+mod dump;
+mod inspect;
+mod output;
+mod render;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+use crate::args::{Cli, Command};
+
+/// Exit code for bad input (unreadable/invalid scene, model or flag).
+pub const EXIT_BAD_INPUT: u8 = 2;
+/// Exit code for failures that are not the user's input (e.g. an output file that cannot be written).
+pub const EXIT_FAILURE: u8 = 1;
+
+/// An error that ends the command, with its exit code.
+#[derive(Debug)]
+pub struct CliError {
+    pub code: u8,
+    pub message: String,
+    /// A rich report (source snippet) to print after the message, if any.
+    pub detail: Option<miette::Report>,
+}
+
+impl CliError {
+    pub fn bad_input(message: impl Into<String>) -> Self {
+        Self { code: EXIT_BAD_INPUT, message: message.into(), detail: None }
+    }
+    pub fn failure(message: impl Into<String>) -> Self {
+        Self { code: EXIT_FAILURE, message: message.into(), detail: None }
+    }
+}
+
+impl From<hybrid_scene::SceneError> for CliError {
+    fn from(e: hybrid_scene::SceneError) -> Self {
+        let message = e.to_string();
+        let detail = e.source_code.is_some().then(|| miette::Report::new(e));
+        Self { code: EXIT_BAD_INPUT, message, detail }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    let result = match cli.command {
+        Command::Render(a) => render::run(a),
+        Command::Inspect(a) => inspect::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", e.message);
+            if let Some(d) = e.detail {
+                eprintln!("{d:?}");
+            }
+            ExitCode::from(e.code)
+        }
+    }
+}

@@ -1,0 +1,133 @@
+//! Command-line arguments (DESIGN §7). Flag names are a contract: keep them.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use hybrid_core::Mode;
+
+#[derive(Debug, Parser)]
+#[command(name = "hybrid", version, about = "Hybrid rasterization + ray tracing renderer (Walewski et al. 2019; Timokhin & Mikhaylyuk depth merge)")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Render one frame of a scene (the built-in demo scene when none is given) to a PNG.
+    Render(RenderArgs),
+    /// Load and validate a scene and print its statistics (the paper's Table 4 row).
+    Inspect(InspectArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct RenderArgs {
+    /// Scene file (TOML). Without one, the built-in demo scene is rendered.
+    pub scene: Option<PathBuf>,
+    /// Output image (8-bit sRGB PNG).
+    #[arg(short = 'o', long = "output", default_value = "out.png")]
+    pub output: PathBuf,
+    /// Image size as WIDTHxHEIGHT. Larger sizes show more detail at the cost of time
+    /// (ray-tracing time grows with the number of masked pixels).
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Which stages run: hybrid (heuristic on), all (every visible object traced),
+    /// rt-only (no raster, everything ray traced), raster (no ray tracing).
+    #[arg(long, default_value = "hybrid", value_parser = parse_mode)]
+    pub mode: Mode,
+    /// Rendering backend. `auto` picks a hardware GPU when one exists, else the CPU.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    /// Write every buffer of the frame (PNG for viewing, EXR for float data) into this folder.
+    #[arg(long)]
+    pub dump: Option<PathBuf>,
+    /// Write a JSON report of the frame (stage times, rays, heuristic decisions) to this file.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Position on the scene's camera path, in seconds (the scene's camera when absent).
+    #[arg(long)]
+    pub time: Option<f32>,
+    /// Heuristic budget T in cost units per frame (overrides the scene). Lower budgets trace
+    /// fewer objects: faster frames at the cost of missing shadows/reflections/refractions.
+    #[arg(long, conflicts_with = "budget_ms")]
+    pub budget: Option<f64>,
+    /// Heuristic budget in milliseconds of trace time per frame (overrides the scene).
+    #[arg(long)]
+    pub budget_ms: Option<f64>,
+    /// Heuristic selection policy (overrides the scene).
+    #[arg(long, value_enum)]
+    pub policy: Option<PolicyChoice>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress bar.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct InspectArgs {
+    /// Scene file (TOML).
+    pub scene: PathBuf,
+    /// Print machine-readable JSON instead of the table row.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BackendChoice {
+    /// A hardware GPU when one exists, else the CPU backend.
+    Auto,
+    /// The pure-Rust CPU backend.
+    Cpu,
+    /// The wgpu backend.
+    Gpu,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PolicyChoice {
+    /// Walewski et al. 2019 (listing 6).
+    Paper,
+    /// Greedy by relevance per cost.
+    Knapsack,
+}
+
+/// Largest accepted image side.
+pub const MAX_SIDE: u32 = 16384;
+
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("size `{s}` must be WIDTHxHEIGHT, e.g. 1280x720"))?;
+    let parse = |v: &str, what: &str| -> Result<u32, String> {
+        let n: u32 = v.trim().parse().map_err(|_| format!("size `{s}`: {what} `{v}` is not a whole number"))?;
+        if n == 0 || n > MAX_SIDE {
+            return Err(format!("size `{s}`: {what} must be between 1 and {MAX_SIDE}"));
+        }
+        Ok(n)
+    };
+    Ok((parse(w, "width")?, parse(h, "height")?))
+}
+
+pub fn parse_mode(s: &str) -> Result<Mode, String> {
+    s.parse()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes() {
+        assert_eq!(parse_size("1280x720"), Ok((1280, 720)));
+        assert_eq!(parse_size("64X32"), Ok((64, 32)));
+        assert!(parse_size("0x10").unwrap_err().contains("between 1"));
+        assert!(parse_size("10").unwrap_err().contains("WIDTHxHEIGHT"));
+        assert!(parse_size("axb").unwrap_err().contains("not a whole number"));
+        assert!(parse_size("99999x10").is_err());
+    }
+
+    #[test]
+    fn modes() {
+        assert_eq!(parse_mode("rt-only"), Ok(Mode::RtOnly));
+        assert!(parse_mode("fast").unwrap_err().contains("unknown mode"));
+    }
+}

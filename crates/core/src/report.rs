@@ -1,0 +1,63 @@
+//! The per-frame report (`hybrid render --report FILE.json`): what every stage took, how many
+//! rays of each kind were traced, and why each object did or did not get its effects.
+
+use serde::Serialize;
+
+use crate::frame::Mode;
+
+/// Wall-clock milliseconds per stage (DESIGN §1). `frame` is the whole frame.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct StageTimings {
+    /// Stage 0: the RT-scene capsule (trace + pack) and its unpack; 0 without point clouds.
+    pub capsule: f64,
+    pub raster: f64,
+    pub heuristic: f64,
+    pub trace: f64,
+    pub blend: f64,
+    pub frame: f64,
+}
+
+/// Rays traced in one frame, by kind.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct RayCounts {
+    pub primary: u64,
+    pub shadow: u64,
+    pub reflection: u64,
+    pub refraction: u64,
+}
+
+impl std::ops::AddAssign for RayCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.primary += o.primary;
+        self.shadow += o.shadow;
+        self.reflection += o.reflection;
+        self.refraction += o.refraction;
+    }
+}
+
+/// What the RT-scene capsule did (paper 2).
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct CapsuleReport {
+    pub points: u64,
+    /// Sphere BVH build (once per scene; reported on every frame).
+    pub build_ms: f64,
+    pub trace_ms: f64,
+    pub pack_ms: f64,
+    pub unpack_ms: f64,
+    pub rays: u64,
+}
+
+/// Everything `--report` writes for one frame.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameReport {
+    pub backend: String,
+    /// [width, height] in pixels.
+    pub size: [u32; 2],
+    pub mode: Mode,
+    pub timings_ms: StageTimings,
+    pub rays: RayCounts,
+    pub triangles: u64,
+    pub objects: u64,
+    pub heuristic: Option<hybrid_heuristic::HeuristicReport>,
+    pub capsule: Option<CapsuleReport>,
+}

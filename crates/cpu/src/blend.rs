@@ -1,0 +1,19 @@
+//! Stage 4, `blend` (paper listing 10, eq. 4–6): lighting, shadow, reflection and refraction
+//! combined under the mask and the optical properties, then sRGB-encoded.
+
+use glam::Vec3;
+use hybrid_core::GBuffer;
+use hybrid_core::blend::{blend_pixel, encode_srgb};
+use rayon::prelude::*;
+
+/// Inputs: the P-buffer (`lighting`), the trace outputs and the G-buffer's optical + mask
+/// targets. Output: the final 8-bit sRGB image.
+pub fn blend(gbuffer: &GBuffer, lighting: &[Vec3], shadow: &[Vec3], reflection: &[Vec3], refraction: &[Vec3]) -> Vec<[u8; 4]> {
+    (0..gbuffer.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|i| {
+            encode_srgb(blend_pixel(lighting[i], shadow[i], reflection[i], refraction[i], gbuffer.optical[i], gbuffer.mask[i]))
+        })
+        .collect()
+}
