@@ -1,0 +1,103 @@
+//! Per-pixel passes over the G-buffer's object-id target: counting A for every object, and
+//! writing the heuristic mask from the selection.
+
+/// Object id of a pixel that no object covers (sky).
+pub const SKY_ID: u32 = u32::MAX;
+/// Object id of a pixel covered by the ray-traced RT-scene (point cloud, DESIGN §5), not by a
+/// selectable object.
+pub const RT_SCENE_ID: u32 = u32::MAX - 1;
+
+/// A (paper Table 3) for every object in one pass: `counts[i]` = number of pixels whose id is `i`.
+///
+/// Ids `>= object_count` are ignored; that includes [`SKY_ID`] and [`RT_SCENE_ID`]. The result
+/// has exactly `object_count` entries.
+///
+/// The pass counts *runs* of equal ids and adds each run once: rasterised images are made of long
+/// horizontal runs, and adding one pixel at a time to the same counter would serialise every
+/// increment on the previous store (≈ 5 cycles per pixel instead of ≈ 1).
+pub fn count_visible_pixels(object_id: &[u32], object_count: usize) -> Vec<u64> {
+    let mut counts = vec![0u64; object_count];
+    let Some((&first, rest)) = object_id.split_first() else {
+        return counts;
+    };
+    let mut current = first;
+    let mut run = 1u64;
+    for &id in rest {
+        if id == current {
+            run += 1;
+        } else {
+            if let Some(count) = counts.get_mut(current as usize) {
+                *count += run;
+            }
+            current = id;
+            run = 1;
+        }
+    }
+    if let Some(count) = counts.get_mut(current as usize) {
+        *count += run;
+    }
+    counts
+}
+
+/// The heuristic mask (DESIGN §2): `mask[p] = 1.0` where pixel `p`'s object is selected, else
+/// `0.0` (sky, RT-scene and ids `>= selected.len()` give 0).
+///
+/// `object_id` and `mask` are the same image and should have the same length; if they do not,
+/// only the common prefix is written.
+pub fn write_mask(object_id: &[u32], selected: &[bool], mask: &mut [f32]) {
+    debug_assert_eq!(object_id.len(), mask.len(), "id buffer and mask differ in size");
+    for (m, &id) in mask.iter_mut().zip(object_id) {
+        let on = selected.get(id as usize).copied().unwrap_or(false);
+        *m = if on { 1.0 } else { 0.0 };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_runs_and_ignores_out_of_range_ids() {
+        let ids = [0, 0, 2, SKY_ID, 2, 2, RT_SCENE_ID, 1, 7, 0];
+        assert_eq!(count_visible_pixels(&ids, 3), vec![3, 1, 3]);
+        // The same buffer against fewer objects drops the higher ids.
+        assert_eq!(count_visible_pixels(&ids, 1), vec![3]);
+        assert_eq!(count_visible_pixels(&[], 2), vec![0, 0]);
+        assert_eq!(count_visible_pixels(&[SKY_ID; 4], 0), Vec::<u64>::new());
+        // Trailing run is flushed.
+        assert_eq!(count_visible_pixels(&[1, 1, 1], 2), vec![0, 3]);
+    }
+
+    #[test]
+    fn counts_match_naive_histogram() {
+        // Deterministic pseudo-random ids with runs of varying length.
+        let mut state = 12345u32;
+        let mut ids = Vec::new();
+        for _ in 0..2000 {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let id = match state >> 29 {
+                0 => SKY_ID,
+                1 => RT_SCENE_ID,
+                _ => (state >> 8) % 23,
+            };
+            let run = (state >> 4) % 9;
+            ids.extend(std::iter::repeat_n(id, run as usize));
+        }
+        let mut naive = vec![0u64; 20];
+        for &id in &ids {
+            if (id as usize) < naive.len() {
+                naive[id as usize] += 1;
+            }
+        }
+        assert_eq!(count_visible_pixels(&ids, 20), naive);
+    }
+
+    #[test]
+    fn mask_marks_exactly_selected_pixels() {
+        let ids = [0, 1, 2, SKY_ID, RT_SCENE_ID, 1, 5, 0];
+        let selected = [false, true, true];
+        let mut mask = [0.5f32; 8];
+        write_mask(&ids, &selected, &mut mask);
+        assert_eq!(mask, [0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
+    }
+}
