@@ -1,0 +1,331 @@
+//! `trace`: the ray-tracing stage of paper 1 (§3.3, listings 8a–d; DESIGN §3), and the primary
+//! rays of the `rt-only` mode.
+//!
+//! Per masked pixel (listing 8a) it writes the shadow buffer (1 minus the Blinn–Phong light that
+//! shadow-casting occluders block), the reflection buffer and the refraction buffer. Secondary
+//! rays shade their closest hit with listing 8c and see the skybox on a miss (listing 8d).
+//!
+//! Reading of listing 8c used here (the paper leaves the payload's initial values open):
+//! - A ray leaving the G-buffer surface has depth 1 and importance = that surface's
+//!   reflectivity (reflection ray) or transparency = 1 − opacity (refraction ray). Listing 8a
+//!   traces it whenever reflectivity > 0 (resp. opacity < 1), without a cutoff test.
+//! - At a hit with reflectivity `r` and transparency `τ`: "reflection-luminance" is the
+//!   luminance of the grey reflectivity colour, i.e. `r` (the luminance weights sum to 1), so
+//!   the child importance is `imp·r` (resp. `imp·τ`); the child is traced when that exceeds
+//!   `scene.trace.importance_cutoff` and the depth is below `scene.trace.max_depth`, and gets
+//!   depth + 1. Untraced children contribute 0.
+//! - Local lighting (listing 5, unshadowed) is computed unless `r ≥ 1` or `τ ≥ 1`; at
+//!   depth ≥ max depth both children are replaced by it; the result is
+//!   `combine(lighting, refl, refr, r, τ)` (the eq. 5/6 average, = color1/color2 of 8c).
+//!
+//! Beyond the paper: a shadow ray whose light contributes nothing to the pixel (back-facing,
+//! outside a spot cone) is not traced, as it cannot change the result.
+//!
+//! Ray origins are offset by `scene.trace.ray_bias` along the normal, on the side the new ray
+//! leaves from (so refraction rays entering glass start inside it). Pixels are independent, so
+//! the output is bit-identical for any thread count.
+
+use glam::{DMat4, DVec3, Vec2, Vec3};
+use hybrid_core::blend::combine;
+use hybrid_core::shading::{lights, local_lighting, reflect, refract_or_reflect, sky};
+use hybrid_core::{GBuffer, Surface};
+use hybrid_scene::{Camera, Projection};
+use rayon::prelude::*;
+
+use crate::bvh::SceneBvh;
+use crate::prepare::PreparedScene;
+
+/// Rays traced by a frame, by kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RayCounts {
+    pub primary: u64,
+    pub shadow: u64,
+    pub reflection: u64,
+    pub refraction: u64,
+}
+
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.primary + self.shadow + self.reflection + self.refraction
+    }
+}
+
+impl std::ops::AddAssign for RayCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.primary += o.primary;
+        self.shadow += o.shadow;
+        self.reflection += o.reflection;
+        self.refraction += o.refraction;
+    }
+}
+
+/// The trace stage's buffers (paper Fig. 5), row-major like the G-buffer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TraceOutput {
+    /// 1 where nothing is blocked; untraced pixels hold 1.
+    pub shadow: Vec<Vec3>,
+    /// Untraced pixels hold 0.
+    pub reflection: Vec<Vec3>,
+    /// Untraced pixels hold 0.
+    pub refraction: Vec<Vec3>,
+    /// Shadow, reflection and refraction rays traced (primary = 0: see [`primary_ray_count`]).
+    pub rays: RayCounts,
+}
+
+/// Pixels per parallel work item (uneven ray cost: items are handed out one at a time).
+const CHUNK: usize = 64;
+
+/// Listing 8a over every pixel of `gbuffer` whose mask is > 0.
+pub fn trace(prepared: &PreparedScene, bvh: &SceneBvh, gbuffer: &GBuffer, camera: &Camera) -> TraceOutput {
+    let n = gbuffer.len();
+    let mut shadow = vec![Vec3::ONE; n];
+    let mut reflection = vec![Vec3::ZERO; n];
+    let mut refraction = vec![Vec3::ZERO; n];
+    let tracer = Tracer { prepared, bvh, camera, primary: PrimaryRays::new(camera, gbuffer.width, gbuffer.height) };
+    let rays = shadow
+        .par_chunks_mut(CHUNK)
+        .zip(reflection.par_chunks_mut(CHUNK))
+        .zip(refraction.par_chunks_mut(CHUNK))
+        .enumerate()
+        .with_max_len(1)
+        .map(|(c, ((s, m), r))| {
+            let mut rays = RayCounts::default();
+            for k in 0..s.len() {
+                let i = c * CHUNK + k;
+                if gbuffer.mask[i] > 0.0 {
+                    (s[k], m[k], r[k]) = tracer.pixel(gbuffer, i, &mut rays);
+                }
+            }
+            rays
+        })
+        .reduce(RayCounts::default, |mut a, b| {
+            a += b;
+            a
+        });
+    TraceOutput { shadow, reflection, refraction, rays }
+}
+
+#[derive(Clone, Copy)]
+enum Kind {
+    Reflection,
+    Refraction,
+}
+
+struct Tracer<'a, 's> {
+    prepared: &'a PreparedScene<'s>,
+    bvh: &'a SceneBvh,
+    camera: &'a Camera,
+    primary: PrimaryRays,
+}
+
+impl Tracer<'_, '_> {
+    /// Listing 8a for pixel `i`: (shadow, reflection, refraction).
+    fn pixel(&self, g: &GBuffer, i: usize, rays: &mut RayCounts) -> (Vec3, Vec3, Vec3) {
+        let scene = self.prepared.scene;
+        let surface = g.surface(i).filter(|s| s.normal.length_squared() > 0.0);
+        let Some(s) = surface else {
+            // Nothing drawn (zero-length normal): the skybox behind the pixel.
+            let (x, y) = ((i % g.width as usize) as u32, (i / g.width as usize) as u32);
+            let (_, dir, _) = self.primary.ray(x, y);
+            return (Vec3::ONE, sky(&scene.environment, &scene.textures, dir), Vec3::ZERO);
+        };
+        let incident = if self.camera.is_orthographic() {
+            self.camera.forward()
+        } else {
+            (s.position - self.camera.position).normalize_or(self.camera.forward())
+        };
+        let view = -incident;
+
+        let mut shadow = Vec3::ONE;
+        for light in lights(&scene.lights) {
+            if !light.casts_shadows() {
+                continue;
+            }
+            let contribution = light.blinn_phong(&s, view);
+            if contribution == Vec3::ZERO {
+                continue;
+            }
+            let (dir, dist) = light.direction_from(s.position);
+            rays.shadow += 1;
+            let att = self.bvh.any_hit_attenuation(self.prepared, self.offset(&s, dir), dir, dist);
+            shadow -= contribution * (1.0 - att);
+        }
+
+        let mut reflection = Vec3::ZERO;
+        if s.reflectivity > 0.0 {
+            let dir = reflect(incident, s.normal).normalize_or_zero();
+            reflection = self.secondary(self.offset(&s, dir), dir, s.reflectivity, 1, Kind::Reflection, rays);
+        }
+        let mut refraction = Vec3::ZERO;
+        if s.opacity < 1.0 {
+            let (dir, _tir) = refract_or_reflect(incident, s.normal, scene.environment.ior, s.ior);
+            refraction = self.secondary(self.offset(&s, dir), dir, 1.0 - s.opacity, 1, Kind::Refraction, rays);
+        }
+        (shadow, reflection, refraction)
+    }
+
+    /// `s.position` moved by the ray bias along the normal, to the side `dir` leaves towards.
+    #[inline]
+    fn offset(&self, s: &Surface, dir: Vec3) -> Vec3 {
+        let bias = self.prepared.scene.trace.ray_bias;
+        let side = s.normal.dot(dir);
+        if side > 0.0 {
+            s.position + s.normal * bias
+        } else if side < 0.0 {
+            s.position - s.normal * bias
+        } else {
+            s.position
+        }
+    }
+
+    /// Traces a secondary ray: closest hit shaded with listing 8c, miss = skybox (listing 8d).
+    fn secondary(&self, origin: Vec3, dir: Vec3, importance: f32, depth: u32, kind: Kind, rays: &mut RayCounts) -> Vec3 {
+        match kind {
+            Kind::Reflection => rays.reflection += 1,
+            Kind::Refraction => rays.refraction += 1,
+        }
+        let scene = self.prepared.scene;
+        let Some(hit) = self.bvh.closest_hit(origin, dir, 0.0, f32::INFINITY) else {
+            return sky(&scene.environment, &scene.textures, dir);
+        };
+        let s = self.prepared.surface_at(hit.triangle, hit.bary, 0.0);
+        let settings = &scene.trace;
+        let reflectivity = s.reflectivity;
+        let transparency = 1.0 - s.opacity;
+
+        let mut refl = Vec3::ZERO;
+        let refl_imp = importance * reflectivity;
+        if refl_imp > settings.importance_cutoff && depth < settings.max_depth {
+            let d = reflect(dir, s.normal).normalize_or_zero();
+            refl = self.secondary(self.offset(&s, d), d, refl_imp, depth + 1, Kind::Reflection, rays);
+        }
+        let mut refr = Vec3::ZERO;
+        let refr_imp = importance * transparency;
+        if refr_imp > settings.importance_cutoff && depth < settings.max_depth {
+            let (d, _tir) = refract_or_reflect(dir, s.normal, scene.environment.ior, s.ior);
+            refr = self.secondary(self.offset(&s, d), d, refr_imp, depth + 1, Kind::Refraction, rays);
+        }
+        let lighting =
+            if reflectivity < 1.0 && transparency < 1.0 { local_lighting(&s, -dir, &scene.lights, &scene.environment) } else { Vec3::ZERO };
+        if depth >= settings.max_depth {
+            refl = lighting;
+            refr = lighting;
+        }
+        combine(lighting, refl, refr, reflectivity, transparency)
+    }
+}
+
+/// Primary rays through pixel centres (row 0 at the top), from the inverse of the raster's
+/// view-projection, so a hit projects back onto its pixel centre. Each ray starts on the near
+/// plane and ends on the far plane, as the raster clips.
+#[derive(Debug, Clone, Copy)]
+pub struct PrimaryRays {
+    inv_view_proj: DMat4,
+    width: u32,
+    height: u32,
+    /// World size of one pixel at unit distance (perspective) or everywhere (orthographic).
+    pixel_size: f32,
+    orthographic: bool,
+    camera: Vec3,
+}
+
+impl PrimaryRays {
+    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
+        let (w, h) = (width.max(1), height.max(1));
+        let aspect = w as f32 / h as f32;
+        let vp = camera.view_projection(aspect).as_dmat4();
+        let pixel_size = match camera.projection {
+            Projection::Perspective { fov_y_deg, .. } => 2.0 * (fov_y_deg.to_radians() * 0.5).tan() / h as f32,
+            Projection::Orthographic { height, .. } => height / h as f32,
+        };
+        Self {
+            inv_view_proj: vp.inverse(),
+            width: w,
+            height: h,
+            pixel_size,
+            orthographic: camera.is_orthographic(),
+            camera: camera.position,
+        }
+    }
+
+    /// `(origin on the near plane, unit direction, distance to the far plane)` for pixel (x, y).
+    pub fn ray(&self, x: u32, y: u32) -> (Vec3, Vec3, f32) {
+        let nx = (x as f64 + 0.5) / self.width as f64 * 2.0 - 1.0;
+        let ny = 1.0 - (y as f64 + 0.5) / self.height as f64 * 2.0;
+        let near = self.inv_view_proj.project_point3(DVec3::new(nx, ny, 1.0));
+        let far = self.inv_view_proj.project_point3(DVec3::new(nx, ny, 0.0));
+        let d = far - near;
+        let len = d.length();
+        if len <= 0.0 || !len.is_finite() {
+            return (near.as_vec3(), Vec3::NEG_Z, 0.0);
+        }
+        (near.as_vec3(), (d / len).as_vec3(), len as f32)
+    }
+
+    /// World size of one pixel at `point` (for texture footprints).
+    fn pixel_world_size(&self, point: Vec3) -> f32 {
+        if self.orthographic { self.pixel_size } else { self.pixel_size * point.distance(self.camera) }
+    }
+}
+
+/// Primary rays of an `rt-only` frame: one per pixel.
+pub fn primary_ray_count(width: u32, height: u32) -> u64 {
+    width as u64 * height as u64
+}
+
+/// The `rt-only` mode's G-buffer: a primary ray per pixel centre, every target filled from the
+/// closest hit with `surface_at` (as the raster would), depth = the hit projected with the
+/// camera's view-projection (reversed-Z), mask = 1 on covered pixels. Count its rays with
+/// [`primary_ray_count`].
+pub fn rt_only_gbuffer(prepared: &PreparedScene, bvh: &SceneBvh, camera: &Camera, width: u32, height: u32) -> GBuffer {
+    let mut g = GBuffer::new(width, height);
+    if width == 0 || height == 0 {
+        return g;
+    }
+    let rays = PrimaryRays::new(camera, width, height);
+    let vp = camera.view_projection(width as f32 / height as f32);
+    let hits: Vec<Option<(u32, f32, Surface)>> = (0..g.len())
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| {
+            let (x, y) = ((i % width as usize) as u32, (i / width as usize) as u32);
+            let (origin, dir, t_max) = rays.ray(x, y);
+            let hit = bvh.closest_hit(origin, dir, 0.0, t_max)?;
+            let point = origin + dir * hit.t;
+            let footprint = uv_footprint(prepared, hit.triangle, dir, rays.pixel_world_size(point));
+            let s = prepared.surface_at(hit.triangle, hit.bary, footprint);
+            let object = prepared.meshes[hit.triangle.mesh as usize].object;
+            let depth = vp.project_point3(s.position).z.clamp(0.0, 1.0);
+            Some((object, depth, s))
+        })
+        .collect();
+    for (i, h) in hits.into_iter().enumerate() {
+        if let Some((object, depth, s)) = h {
+            g.write(i, object, depth, &s);
+            g.mask[i] = 1.0;
+        }
+    }
+    g
+}
+
+/// UV change per pixel on a triangle seen along `dir` with pixel size `world` at the hit:
+/// the pixel's footprint (stretched by the viewing angle, as the raster's larger screen
+/// derivative is) times the triangle's UV-per-world-length scale.
+fn uv_footprint(prepared: &PreparedScene, t: crate::prepare::TriangleRef, dir: Vec3, world: f32) -> f32 {
+    let mesh = &prepared.meshes[t.mesh as usize];
+    if mesh.uvs.is_empty() {
+        return 0.0;
+    }
+    let [i0, i1, i2] = mesh.indices[t.triangle as usize].map(|i| i as usize);
+    let [p0, p1, p2] = prepared.triangle(t);
+    let cross = (p1 - p0).cross(p2 - p0);
+    let world_area = cross.length();
+    let (u0, u1, u2): (Vec2, Vec2, Vec2) = (mesh.uvs[i0], mesh.uvs[i1], mesh.uvs[i2]);
+    let uv_area = (u1 - u0).perp_dot(u2 - u0).abs();
+    if world_area <= 0.0 || !world_area.is_finite() {
+        return 0.0;
+    }
+    let cos = (cross / world_area).dot(dir).abs().max(0.25);
+    let f = world / cos * (uv_area / world_area).sqrt();
+    if f.is_finite() { f } else { 0.0 }
+}
