@@ -371,3 +371,36 @@ fn tree_scene_point_cloud_is_y_up() {
     // Trees up to ~13 m tall: after the Z-up → Y-up rotation, the tall axis is Y.
     assert!(b.max.y - b.min.y > 12.0, "{b:?}");
 }
+
+/// Every asset scene's camera path lasts 20 s and stays inside the scene's bounds (polygons and
+/// point clouds), sampled every 0.1 s, so benchmarks never film the void.
+#[test]
+fn asset_camera_paths_stay_inside_the_scene() {
+    for name in ["sponza-spheres", "sponza-armadillo", "dining-room", "pavilion", "tree-merge"] {
+        let s = load_scene(&scenes_dir().join(format!("{name}.toml"))).unwrap_or_else(|e| panic!("{e}"));
+        let mut b = hybrid_scene::Aabb::EMPTY;
+        for o in &s.objects {
+            if let Some(ob) = o.world_bounds() {
+                b = b.union(&ob);
+            }
+        }
+        for pc in &s.point_clouds {
+            b = b.union(&pc.bounds());
+        }
+        let path = s.camera_path.as_ref().expect("camera path");
+        assert!(path.keyframes.len() >= 4, "{name}: {} keyframes", path.keyframes.len());
+        assert!((path.duration() - 20.0).abs() < 1e-3, "{name}: {} s", path.duration());
+        let tris: usize = s.objects.iter().map(|o| o.triangle_count()).sum();
+        let pts: usize = s.point_clouds.iter().map(|p| p.points.len()).sum();
+        println!(
+            "{name}: {} objects, {tris} triangles, {pts} points, {} materials, {} textures, bounds {b:?}",
+            s.objects.len(),
+            s.materials.len(),
+            s.textures.len()
+        );
+        for i in 0..=200 {
+            let (p, _) = path.sample(i as f32 * 0.1);
+            assert!(p.cmpge(b.min).all() && p.cmple(b.max).all(), "{name}: camera at {p} (t = {}) leaves the scene {b:?}", i as f32 * 0.1);
+        }
+    }
+}
