@@ -1,0 +1,442 @@
+//! The RT-scene capsule (paper 2, DESIGN §5): a plug-in that ray traces a point cloud of spheres
+//! and hands the host a packed frame (colour + depth per texel) for the depth merge.
+//!
+//! The host sees only [`RtCapsule`]: "give me a packed frame for this camera". The frame exchange
+//! is the paper's handshake ([`FrameExchange`]): the host signals "host finished" (semaphore S1),
+//! the capsule thread renders (ray generation, trace, shading, block D, block P), signals
+//! "capsule finished" (S2) with the frame, and the host merges (block U). [`render_sync`] is the
+//! same exchange without a thread, for tests and the single-threaded frame.
+//!
+//! [`PointCloudCapsule`] builds **one sphere BVH per cloud** (each cloud has its own radius; a
+//! scene usually has one cloud) and traces them in turn with a shrinking `t_max`, so the closest
+//! hit over all clouds wins.
+
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use glam::{Mat4, Vec3};
+use hybrid_core::Surface;
+use hybrid_core::depth_merge::{
+    MISS_TEXEL, PackedRtFrame, encode_hit, synthesize_depth, synthesize_depth_orthographic, view_z_from_depth,
+    view_z_from_depth_orthographic,
+};
+use hybrid_core::shading::local_lighting;
+use hybrid_scene::texture::srgb_to_linear;
+use hybrid_scene::{Camera, Environment, Lights, PointCloud, PointColoring};
+use rayon::prelude::*;
+
+use crate::spheres::{SphereBvh, SphereBvhError};
+
+pub use hybrid_core::depth_merge::CapsuleStats;
+
+/// What the host asks of the capsule each frame. `clip_depth` (optional, beyond the paper) is the
+/// raster's reversed-Z depth per pixel (row-major, 0 = nothing drawn): rays stop at the raster
+/// surface, since anything behind it would lose the depth test anyway.
+#[derive(Debug, Clone, Copy)]
+pub struct CapsuleRequest<'a> {
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    pub clip_depth: Option<&'a [f32]>,
+}
+
+/// A ray-tracing plug-in producing a packed RT frame (blocks D and P inside).
+pub trait RtCapsule: Send {
+    /// Renders `request` into `out` (resized to the request; misses all zero).
+    fn render(&mut self, request: &CapsuleRequest<'_>, out: &mut PackedRtFrame) -> CapsuleStats;
+}
+
+/// The exchange without a thread: host finished → capsule renders → capsule finished.
+pub fn render_sync(capsule: &mut dyn RtCapsule, request: &CapsuleRequest<'_>) -> (PackedRtFrame, CapsuleStats) {
+    let mut frame = PackedRtFrame::new(request.width, request.height);
+    let stats = capsule.render(request, &mut frame);
+    (frame, stats)
+}
+
+/// An owned [`CapsuleRequest`], to cross to the capsule thread.
+#[derive(Debug, Clone)]
+pub struct OwnedCapsuleRequest {
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    pub clip_depth: Option<Vec<f32>>,
+}
+
+impl OwnedCapsuleRequest {
+    pub fn as_request(&self) -> CapsuleRequest<'_> {
+        CapsuleRequest { camera: self.camera, width: self.width, height: self.height, clip_depth: self.clip_depth.as_deref() }
+    }
+}
+
+/// Where the exchange stands (the paper's two semaphore pairs: S1 "host finished", S2 "capsule
+/// finished"; each resets after it is consumed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExchangeState {
+    /// Both semaphores in standby: the host owns the frame and may merge it or ask for the next.
+    HostOwnsFrame,
+    /// S1 signalled: the capsule is rendering; the host waits on S2.
+    CapsuleRendering,
+}
+
+/// A misuse of the exchange or a capsule thread that died.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ExchangeError {
+    /// `host_finished` while the capsule is still rendering, or `wait_capsule_finished` with no
+    /// frame requested.
+    OutOfOrder(ExchangeState),
+    /// The capsule thread has stopped (it panicked).
+    CapsuleGone,
+}
+
+impl std::fmt::Display for ExchangeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::OutOfOrder(s) => write!(f, "frame exchange called out of order (state {s:?})"),
+            Self::CapsuleGone => write!(f, "the RT capsule thread has stopped"),
+        }
+    }
+}
+
+impl std::error::Error for ExchangeError {}
+
+enum HostSignal {
+    /// S1: the host finished its frame; render this request into this (recycled) buffer.
+    HostFinished(OwnedCapsuleRequest, PackedRtFrame),
+    Stop,
+}
+
+/// The handshake with a capsule running on its own thread. Per frame:
+/// `host_finished(request)` (S1) → capsule renders → `wait_capsule_finished()` (S2) returns the
+/// frame → the host merges it → `recycle(frame)` returns the buffer for the next frame.
+pub struct FrameExchange {
+    to_capsule: Sender<HostSignal>,
+    from_capsule: Receiver<(PackedRtFrame, CapsuleStats)>,
+    thread: Option<JoinHandle<()>>,
+    state: ExchangeState,
+    spare: Option<PackedRtFrame>,
+}
+
+impl FrameExchange {
+    /// Starts the capsule thread.
+    pub fn spawn(mut capsule: Box<dyn RtCapsule>) -> std::io::Result<Self> {
+        let (to_capsule, host_rx) = channel::<HostSignal>();
+        let (capsule_tx, from_capsule) = channel();
+        let thread = std::thread::Builder::new().name("rt-capsule".into()).spawn(move || {
+            while let Ok(HostSignal::HostFinished(request, mut frame)) = host_rx.recv() {
+                let stats = capsule.render(&request.as_request(), &mut frame);
+                // S2: capsule finished.
+                if capsule_tx.send((frame, stats)).is_err() {
+                    break;
+                }
+            }
+        })?;
+        Ok(Self { to_capsule, from_capsule, thread: Some(thread), state: ExchangeState::HostOwnsFrame, spare: None })
+    }
+
+    pub fn state(&self) -> ExchangeState {
+        self.state
+    }
+
+    /// Signals S1 (host finished): the capsule starts rendering `request`.
+    pub fn host_finished(&mut self, request: OwnedCapsuleRequest) -> Result<(), ExchangeError> {
+        if self.state != ExchangeState::HostOwnsFrame {
+            return Err(ExchangeError::OutOfOrder(self.state));
+        }
+        let frame = self.spare.take().unwrap_or_else(|| PackedRtFrame::new(0, 0));
+        self.to_capsule.send(HostSignal::HostFinished(request, frame)).map_err(|_| ExchangeError::CapsuleGone)?;
+        self.state = ExchangeState::CapsuleRendering;
+        Ok(())
+    }
+
+    /// Waits for S2 (capsule finished) and takes the packed frame.
+    pub fn wait_capsule_finished(&mut self) -> Result<(PackedRtFrame, CapsuleStats), ExchangeError> {
+        if self.state != ExchangeState::CapsuleRendering {
+            return Err(ExchangeError::OutOfOrder(self.state));
+        }
+        let r = self.from_capsule.recv().map_err(|_| ExchangeError::CapsuleGone)?;
+        self.state = ExchangeState::HostOwnsFrame;
+        Ok(r)
+    }
+
+    /// Hands a merged frame's buffer back so the next frame reuses its allocation.
+    pub fn recycle(&mut self, frame: PackedRtFrame) {
+        self.spare = Some(frame);
+    }
+}
+
+impl Drop for FrameExchange {
+    fn drop(&mut self) {
+        let _ = self.to_capsule.send(HostSignal::Stop);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// One pixel's primary ray (ray generation, paper eq. 3–5): world origin, unit world direction,
+/// the direction's view-space z (for block D) and the frustum's `t` range (near to far plane).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PrimaryRay {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub dir_view_z: f32,
+    pub t_min: f32,
+    pub t_max: f32,
+}
+
+/// Ray generation for a camera and image size: pixel centres, row 0 at the top. The view-space
+/// direction inverts the camera's projection exactly (`x_ndc / P₀₀`, `y_ndc / P₁₁`), so a hit
+/// projects back onto its pixel centre with the raster's view-projection.
+#[derive(Debug, Clone, Copy)]
+pub struct RayGen {
+    view_inv: Mat4,
+    sx: f32,
+    sy: f32,
+    width: f32,
+    height: f32,
+    near: f32,
+    far: f32,
+    ortho: bool,
+}
+
+impl RayGen {
+    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
+        let aspect = width.max(1) as f32 / height.max(1) as f32;
+        let p = camera.projection(aspect);
+        let (near, far) = camera.near_far();
+        Self {
+            view_inv: camera.view().inverse(),
+            sx: p.x_axis.x,
+            sy: p.y_axis.y,
+            width: width as f32,
+            height: height as f32,
+            near,
+            far,
+            ortho: camera.is_orthographic(),
+        }
+    }
+
+    #[inline]
+    pub fn ray(&self, col: u32, row: u32) -> PrimaryRay {
+        let x = 2.0 * (col as f32 + 0.5) / self.width - 1.0;
+        let y = 1.0 - 2.0 * (row as f32 + 0.5) / self.height;
+        if self.ortho {
+            let origin = self.view_inv.transform_point3(Vec3::new(x / self.sx, y / self.sy, 0.0));
+            let dir = self.view_inv.transform_vector3(Vec3::NEG_Z).normalize();
+            PrimaryRay { origin, dir, dir_view_z: -1.0, t_min: self.near, t_max: self.far }
+        } else {
+            let dv = Vec3::new(x / self.sx, y / self.sy, -1.0).normalize();
+            let dir = self.view_inv.transform_vector3(dv);
+            let origin = self.view_inv.w_axis.truncate();
+            PrimaryRay { origin, dir, dir_view_z: dv.z, t_min: self.near / -dv.z, t_max: self.far / -dv.z }
+        }
+    }
+
+    /// Block D: reversed-Z window depth of the point at `t` along `ray`.
+    #[inline]
+    pub fn depth(&self, ray: &PrimaryRay, t: f32) -> f32 {
+        if self.ortho {
+            synthesize_depth_orthographic(t, ray.dir_view_z, self.near, self.far)
+        } else {
+            synthesize_depth(t, ray.dir_view_z, self.near, self.far)
+        }
+    }
+
+    /// The `t` along `ray` at which it reaches reversed-Z depth `z_w` (inverse of block D).
+    #[inline]
+    pub fn t_at_depth(&self, ray: &PrimaryRay, z_w: f32) -> f32 {
+        let z_e = if self.ortho { view_z_from_depth_orthographic(z_w, self.near, self.far) } else { view_z_from_depth(z_w, self.near, self.far) };
+        z_e / ray.dir_view_z
+    }
+}
+
+/// Why a capsule could not be built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CapsuleError {
+    pub cloud: String,
+    pub error: SphereBvhError,
+}
+
+impl std::fmt::Display for CapsuleError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "point cloud `{}`: {}", self.cloud, self.error)
+    }
+}
+
+impl std::error::Error for CapsuleError {}
+
+/// Colour map over height: brown at the cloud's lowest point, green at its highest (linear).
+pub const HEIGHT_LOW: Vec3 = Vec3::new(0.20, 0.11, 0.04);
+pub const HEIGHT_HIGH: Vec3 = Vec3::new(0.12, 0.42, 0.08);
+
+/// How one cloud's spheres get their colour.
+#[derive(Debug, Clone)]
+enum CloudColor {
+    /// sRGB colours from the file, by original point index.
+    File(Vec<[u8; 3]>),
+    Uniform(Vec3),
+    Height { y_min: f32, inv_range: f32 },
+}
+
+struct Cloud {
+    bvh: SphereBvh,
+    color: CloudColor,
+    specular: Vec3,
+    shininess: f32,
+}
+
+impl Cloud {
+    #[inline]
+    fn albedo(&self, slot: u32, center: Vec3) -> Vec3 {
+        match &self.color {
+            CloudColor::Uniform(c) => *c,
+            CloudColor::Height { y_min, inv_range } => {
+                let h = ((center.y - y_min) * inv_range).clamp(0.0, 1.0);
+                HEIGHT_LOW.lerp(HEIGHT_HIGH, h)
+            }
+            CloudColor::File(colors) => match colors.get(self.bvh.index_of_slot(slot) as usize) {
+                Some(c) => Vec3::new(srgb_to_linear(c[0] as f32 / 255.0), srgb_to_linear(c[1] as f32 / 255.0), srgb_to_linear(c[2] as f32 / 255.0)),
+                None => HEIGHT_LOW,
+            },
+        }
+    }
+}
+
+/// The point-cloud capsule: spheres traced through their own BVH, Blinn–Phong shaded with the
+/// scene's lights and ambient, packed with their synthesized depth.
+pub struct PointCloudCapsule {
+    clouds: Vec<Cloud>,
+    lights: Lights,
+    env: Environment,
+    build_ms: f64,
+    points: u64,
+}
+
+impl PointCloudCapsule {
+    /// Builds one sphere BVH per cloud (each cloud keeps its own radius).
+    pub fn new(clouds: &[PointCloud], lights: Lights, env: Environment) -> Result<Self, CapsuleError> {
+        let start = Instant::now();
+        let mut built = Vec::with_capacity(clouds.len());
+        for pc in clouds {
+            let bvh = SphereBvh::build(&pc.points, pc.radius).map_err(|error| CapsuleError { cloud: pc.name.clone(), error })?;
+            let height = || {
+                let (lo, hi) = pc.points.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), p| (lo.min(p.y), hi.max(p.y)));
+                let range = hi - lo;
+                CloudColor::Height { y_min: lo, inv_range: if range > 0.0 { 1.0 / range } else { 0.0 } }
+            };
+            let color = match &pc.coloring {
+                PointColoring::Uniform(c) => CloudColor::Uniform(*c),
+                PointColoring::Height => height(),
+                PointColoring::FileOrHeight if pc.colors.len() == pc.points.len() && !pc.colors.is_empty() => CloudColor::File(pc.colors.clone()),
+                PointColoring::FileOrHeight => height(),
+            };
+            built.push(Cloud { bvh, color, specular: pc.specular, shininess: pc.shininess });
+        }
+        let points = clouds.iter().map(|c| c.points.len() as u64).sum();
+        Ok(Self { clouds: built, lights, env, build_ms: start.elapsed().as_secs_f64() * 1e3, points })
+    }
+
+    /// Bytes of the BVHs, sphere centres and colours.
+    pub fn bytes(&self) -> usize {
+        self.clouds
+            .iter()
+            .map(|c| c.bvh.bytes() + if let CloudColor::File(v) = &c.color { v.len() * 3 } else { 0 })
+            .sum()
+    }
+
+    pub fn build_ms(&self) -> f64 {
+        self.build_ms
+    }
+
+    /// Traces one primary ray: `Some((linear colour, t))` of the closest sphere before `t_max`.
+    #[inline]
+    fn shade_ray(&self, ray: &PrimaryRay, t_max: f32) -> Option<(Vec3, f32)> {
+        let mut best: Option<(f32, usize, u32)> = None;
+        let mut limit = t_max;
+        for (ci, cloud) in self.clouds.iter().enumerate() {
+            if let Some((t, slot)) = cloud.bvh.closest_hit_slot(ray.origin, ray.dir, ray.t_min, limit)
+                && best.is_none_or(|b| t < b.0)
+            {
+                best = Some((t, ci, slot));
+                limit = t;
+            }
+        }
+        let (t, ci, slot) = best?;
+        let cloud = &self.clouds[ci];
+        let center = cloud.bvh.center_of_slot(slot);
+        let position = ray.origin + ray.dir * t;
+        let normal = ((position - center) / cloud.bvh.radius()).normalize_or(-ray.dir);
+        let albedo = cloud.albedo(slot, center);
+        let s = Surface {
+            position,
+            normal,
+            diffuse: albedo,
+            ambient: albedo,
+            opacity: 1.0,
+            specular: cloud.specular,
+            shininess: cloud.shininess,
+            ior: 1.0,
+            ..Default::default()
+        };
+        Some((local_lighting(&s, -ray.dir, &self.lights, &self.env), t))
+    }
+}
+
+impl RtCapsule for PointCloudCapsule {
+    fn render(&mut self, request: &CapsuleRequest<'_>, out: &mut PackedRtFrame) -> CapsuleStats {
+        let (w, h) = (request.width, request.height);
+        out.reset(w, h);
+        let start = Instant::now();
+        let raygen = RayGen::new(&request.camera, w, h);
+        let n = w as usize * h as usize;
+        let clip = request.clip_depth.filter(|c| {
+            let ok = c.len() == n;
+            if !ok {
+                tracing::warn!("clip depth has {} values for {n} pixels; tracing unclipped", c.len());
+            }
+            ok
+        });
+        let this = &*self;
+        let hits: usize = if w == 0 {
+            0
+        } else {
+            out.texels
+                .par_chunks_mut(w as usize)
+                .with_max_len(1)
+                .enumerate()
+                .map(|(row, texels)| {
+                    let mut hits = 0;
+                    for (col, texel) in texels.iter_mut().enumerate() {
+                        let ray = raygen.ray(col as u32, row as u32);
+                        let mut t_max = ray.t_max;
+                        if let Some(c) = clip {
+                            let z = c[row * w as usize + col];
+                            if z > 0.0 {
+                                t_max = t_max.min(raygen.t_at_depth(&ray, z));
+                            }
+                        }
+                        *texel = match this.shade_ray(&ray, t_max) {
+                            Some((color, t)) => {
+                                hits += 1;
+                                // Block D then block P, fused as in the paper's ray-generation shader.
+                                encode_hit(color, raygen.depth(&ray, t))
+                            }
+                            None => MISS_TEXEL,
+                        };
+                    }
+                    hits
+                })
+                .sum()
+        };
+        CapsuleStats {
+            points: self.points,
+            build_ms: self.build_ms,
+            trace_ms: start.elapsed().as_secs_f64() * 1e3,
+            pack_ms: 0.0,
+            rays: n as u64,
+            hits: hits as u64,
+            bytes: self.bytes() as u64,
+        }
+    }
+}

@@ -1,0 +1,568 @@
+//! A BVH over millions of equal-radius spheres (the RT-scene's point cloud, DESIGN §5).
+//!
+//! - **Build**: binned SAH (16 bins per axis, all three axes) over the sphere centres. With one
+//!   radius, a node's box is its centres' box grown by `r`, so the bins track centre bounds only.
+//!   The top of the tree is built in parallel with `rayon::join`; every subtree is laid out in
+//!   depth-first order and stitched by its parent, so the result does not depend on the thread
+//!   count or timing (deterministic).
+//! - **Layout** (memory): centres are stored in leaf order (12 B/sphere) with their original index
+//!   (4 B/sphere); inner nodes hold both children's boxes (56 B per inner node, about one inner
+//!   node per 2–4 spheres). [`SphereBvh::bytes`] reports the total.
+//! - **Trace**: ordered depth-first traversal (near child first, far child on a stack with its
+//!   entry distance, skipped when a closer hit has been found), exact ray–sphere test in the
+//!   perpendicular-distance form (KNOWN-GOOD gotcha 13): project the centre on the ray and compare
+//!   the squared distance of the centre from the ray with r². Ties in t go to the lower index, so
+//!   the result equals brute force whatever the traversal order.
+
+use glam::Vec3;
+
+/// Spheres per leaf at most.
+const LEAF_MAX: usize = 4;
+/// SAH bins per axis.
+const BINS: usize = 16;
+/// Subtrees with more spheres than this are built with `rayon::join`.
+const PARALLEL_MIN: usize = 16 * 1024;
+/// Leaf reference flag; a leaf reference holds `start << 4 | count`.
+const LEAF: u32 = 1 << 31;
+/// Traversal stack depth (the build's depth is bounded well below this: see `build_node`).
+const STACK: usize = 96;
+/// Largest number of spheres (leaf starts have 27 bits).
+pub const MAX_SPHERES: usize = 1 << 27;
+
+/// One inner node: the boxes of its two children (structure of arrays: index 0 = left, 1 = right)
+/// and their references (an inner-node index, or `LEAF | start << 4 | count`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Node {
+    min_x: [f32; 2],
+    min_y: [f32; 2],
+    min_z: [f32; 2],
+    max_x: [f32; 2],
+    max_y: [f32; 2],
+    max_z: [f32; 2],
+    child: [u32; 2],
+}
+
+/// A sphere BVH. Directions passed to [`SphereBvh::closest_hit`] need not be unit length.
+#[derive(Debug, Clone)]
+pub struct SphereBvh {
+    radius: f32,
+    /// Sphere centres in leaf order.
+    centers: Vec<[f32; 3]>,
+    /// Original index (into the `centers` given to `build`) of each leaf-order sphere.
+    indices: Vec<u32>,
+    nodes: Vec<Node>,
+    /// The root reference (inner node 0, or a leaf when there are ≤ `LEAF_MAX` spheres).
+    root: u32,
+    root_min: Vec3,
+    root_max: Vec3,
+}
+
+/// Why a BVH could not be built.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SphereBvhError {
+    TooManySpheres(usize),
+    BadRadius(f32),
+    NonFiniteCenter(usize),
+}
+
+impl std::fmt::Display for SphereBvhError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::TooManySpheres(n) => write!(f, "{n} spheres: at most {MAX_SPHERES} fit in one sphere BVH"),
+            Self::BadRadius(r) => write!(f, "sphere radius {r} must be finite and > 0"),
+            Self::NonFiniteCenter(i) => write!(f, "sphere {i} has a non-finite centre"),
+        }
+    }
+}
+
+impl std::error::Error for SphereBvhError {}
+
+/// Build-time item: a centre and its original index (16 bytes).
+#[derive(Debug, Clone, Copy)]
+struct Item {
+    c: [f32; 3],
+    index: u32,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Bounds {
+    min: Vec3,
+    max: Vec3,
+}
+
+impl Bounds {
+    const EMPTY: Self = Self { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
+    #[inline]
+    fn grow(&mut self, p: Vec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+    #[inline]
+    fn union(self, o: Self) -> Self {
+        Self { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+    /// Half the surface area of the box grown by `r` (0 for an empty box).
+    #[inline]
+    fn half_area(self, r: f32) -> f32 {
+        if self.min.x > self.max.x {
+            return 0.0;
+        }
+        let e = self.max - self.min + Vec3::splat(2.0 * r);
+        e.x * e.y + e.y * e.z + e.z * e.x
+    }
+    fn of(items: &[Item]) -> Self {
+        let mut b = Self::EMPTY;
+        for it in items {
+            b.grow(Vec3::from(it.c));
+        }
+        b
+    }
+}
+
+/// A subtree: its inner nodes in depth-first order (local indices, root first when inner) and its
+/// root reference (local).
+struct Subtree {
+    nodes: Vec<Node>,
+    root: u32,
+}
+
+impl SphereBvh {
+    /// Builds the BVH over spheres of one `radius` at `centers`.
+    pub fn build(centers: &[Vec3], radius: f32) -> Result<Self, SphereBvhError> {
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(SphereBvhError::BadRadius(radius));
+        }
+        if centers.len() > MAX_SPHERES {
+            return Err(SphereBvhError::TooManySpheres(centers.len()));
+        }
+        if let Some(i) = centers.iter().position(|c| !c.is_finite()) {
+            return Err(SphereBvhError::NonFiniteCenter(i));
+        }
+        let mut items: Vec<Item> = centers.iter().enumerate().map(|(i, c)| Item { c: c.to_array(), index: i as u32 }).collect();
+        let cb = par_bounds(&items);
+        let tree = if items.is_empty() { Subtree { nodes: Vec::new(), root: LEAF } } else { build_node(&mut items, 0, cb, radius, 0) };
+        let (root_min, root_max) =
+            if items.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (cb.min - Vec3::splat(radius), cb.max + Vec3::splat(radius)) };
+        Ok(Self {
+            radius,
+            centers: items.iter().map(|it| it.c).collect(),
+            indices: items.iter().map(|it| it.index).collect(),
+            nodes: tree.nodes,
+            root: tree.root,
+            root_min,
+            root_max,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.centers.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.centers.is_empty()
+    }
+    pub fn radius(&self) -> f32 {
+        self.radius
+    }
+    /// Inner nodes.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+    /// Heap bytes held: centres, original indices and nodes.
+    pub fn bytes(&self) -> usize {
+        self.centers.len() * size_of::<[f32; 3]>() + self.indices.len() * size_of::<u32>() + self.nodes.len() * size_of::<Node>()
+    }
+    /// The centre of the sphere in leaf-order slot `slot`.
+    pub fn center_of_slot(&self, slot: u32) -> Vec3 {
+        Vec3::from(self.centers[slot as usize])
+    }
+
+    /// Bounds of all spheres (zero box when empty).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        (self.root_min, self.root_max)
+    }
+
+    /// The closest sphere hit by the ray `origin + t·dir` with `t_min ≤ t ≤ t_max`: the hit `t`
+    /// (in units of `dir`'s length) and the sphere's index into the `centers` given to `build`.
+    /// Rays starting inside a sphere hit its far side.
+    pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
+        self.closest_hit_slot(origin, dir, t_min, t_max).map(|(t, slot)| (t, self.indices[slot as usize]))
+    }
+
+    /// The original index (into the `centers` given to `build`) of leaf-order slot `slot`.
+    pub fn index_of_slot(&self, slot: u32) -> u32 {
+        self.indices[slot as usize]
+    }
+
+    /// As [`SphereBvh::closest_hit`], but returns the sphere's leaf-order slot (see
+    /// [`SphereBvh::center_of_slot`], [`SphereBvh::index_of_slot`]).
+    pub fn closest_hit_slot(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
+        if self.centers.is_empty() {
+            return None;
+        }
+        let len = dir.length();
+        if !(len > 0.0 && len.is_finite()) || !(t_max >= t_min) {
+            return None;
+        }
+        let d = dir / len;
+        let ray = Ray::new(origin, d, t_min * len, t_max * len, self.radius);
+        // Cull against the root box first.
+        let (e, x) = ray.slab(self.root_min, self.root_max);
+        if e > x {
+            return None;
+        }
+        let mut best_t = ray.t_max;
+        let mut best = u32::MAX;
+        let mut best_slot = 0u32;
+        let mut stack = [(0u32, 0f32); STACK];
+        let mut sp = 0usize;
+        let mut cur = self.root;
+        loop {
+            if cur & LEAF != 0 {
+                let start = ((cur & !LEAF) >> 4) as usize;
+                let count = (cur & 0xF) as usize;
+                for slot in start..start + count {
+                    if let Some(t) = ray.sphere(self.centers[slot], best_t) {
+                        let idx = self.indices[slot];
+                        if t < best_t || (t == best_t && idx < best) {
+                            best_t = t;
+                            best = idx;
+                            best_slot = slot as u32;
+                        }
+                    }
+                }
+            } else {
+                let n = &self.nodes[cur as usize];
+                let (e0, x0) = ray.slab(Vec3::new(n.min_x[0], n.min_y[0], n.min_z[0]), Vec3::new(n.max_x[0], n.max_y[0], n.max_z[0]));
+                let (e1, x1) = ray.slab(Vec3::new(n.min_x[1], n.min_y[1], n.min_z[1]), Vec3::new(n.max_x[1], n.max_y[1], n.max_z[1]));
+                let h0 = e0 <= x0 && e0 <= best_t;
+                let h1 = e1 <= x1 && e1 <= best_t;
+                match (h0, h1) {
+                    (true, true) => {
+                        let (near, far, far_e) = if e0 <= e1 { (n.child[0], n.child[1], e1) } else { (n.child[1], n.child[0], e0) };
+                        if sp < STACK {
+                            stack[sp] = (far, far_e);
+                            sp += 1;
+                        }
+                        cur = near;
+                        continue;
+                    }
+                    (true, false) => {
+                        cur = n.child[0];
+                        continue;
+                    }
+                    (false, true) => {
+                        cur = n.child[1];
+                        continue;
+                    }
+                    (false, false) => {}
+                }
+            }
+            // Pop the next subtree that can still hold a closer hit.
+            loop {
+                if sp == 0 {
+                    return if best == u32::MAX { None } else { Some((best_t / len, best_slot)) };
+                }
+                sp -= 1;
+                let (r, e) = stack[sp];
+                if e <= best_t {
+                    cur = r;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// Exact ray–sphere intersection in the perpendicular-distance form for a unit direction `d`:
+/// the ray parameter of the first intersection within `[t_min, t_max]`, if any.
+#[inline]
+pub fn ray_sphere(origin: Vec3, d: Vec3, center: Vec3, radius: f32, t_min: f32, t_max: f32) -> Option<f32> {
+    let oc = center - origin;
+    let tc = oc.dot(d);
+    let perp = oc - tc * d;
+    let p2 = perp.length_squared();
+    let r2 = radius * radius;
+    if p2 > r2 {
+        return None;
+    }
+    let half = (r2 - p2).sqrt();
+    let t0 = tc - half;
+    if t0 >= t_min {
+        return if t0 <= t_max { Some(t0) } else { None };
+    }
+    let t1 = tc + half;
+    if t1 >= t_min && t1 <= t_max { Some(t1) } else { None }
+}
+
+/// Brute force over all spheres (for tests): the same test and tie rule as the BVH.
+pub fn closest_hit_brute_force(centers: &[Vec3], radius: f32, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
+    let len = dir.length();
+    if !(len > 0.0 && len.is_finite()) {
+        return None;
+    }
+    let d = dir / len;
+    let mut best: Option<(f32, u32)> = None;
+    for (i, c) in centers.iter().enumerate() {
+        let limit = best.map_or(t_max * len, |b| b.0);
+        if let Some(t) = ray_sphere(origin, d, *c, radius, t_min * len, limit)
+            && best.is_none_or(|b| t < b.0)
+        {
+            best = Some((t, i as u32));
+        }
+    }
+    best.map(|(t, i)| (t / len, i))
+}
+
+/// A ray prepared for traversal (unit direction).
+struct Ray {
+    o: Vec3,
+    d: Vec3,
+    inv: Vec3,
+    t_min: f32,
+    t_max: f32,
+    r: f32,
+}
+
+impl Ray {
+    #[inline]
+    fn new(o: Vec3, d: Vec3, t_min: f32, t_max: f32, r: f32) -> Self {
+        Self { o, d, inv: d.recip(), t_min, t_max, r }
+    }
+
+    /// Entry and exit parameters of the box (entry > exit: miss), clipped to `[t_min, t_max]`.
+    /// Boxes are padded by a relative epsilon so tangent sphere hits are never culled.
+    #[inline]
+    fn slab(&self, min: Vec3, max: Vec3) -> (f32, f32) {
+        let a = (min - self.o) * self.inv;
+        let b = (max - self.o) * self.inv;
+        let lo = a.min(b);
+        let hi = a.max(b);
+        let e = lo.max_element().max(self.t_min);
+        let x = hi.min_element().min(self.t_max);
+        // 1e-5 relative slack covers the rounding of the box and of the slab planes.
+        (e - e.abs() * 1e-5, x + x.abs() * 1e-5)
+    }
+
+    #[inline]
+    fn sphere(&self, c: [f32; 3], t_max: f32) -> Option<f32> {
+        ray_sphere(self.o, self.d, Vec3::from(c), self.r, self.t_min, t_max)
+    }
+}
+
+/// Centre bounds of many items, in parallel.
+fn par_bounds(items: &[Item]) -> Bounds {
+    use rayon::prelude::*;
+    if items.len() < PARALLEL_MIN {
+        return Bounds::of(items);
+    }
+    items.par_chunks(PARALLEL_MIN).map(Bounds::of).reduce(|| Bounds::EMPTY, Bounds::union)
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Bin {
+    count: u32,
+    b: Bounds,
+}
+
+const EMPTY_BIN: Bin = Bin { count: 0, b: Bounds::EMPTY };
+
+/// Bins of one range along all three axes.
+fn bin_items(items: &[Item], cmin: Vec3, scale: Vec3) -> [[Bin; BINS]; 3] {
+    let mut bins = [[EMPTY_BIN; BINS]; 3];
+    for it in items {
+        let c = Vec3::from(it.c);
+        let f = (c - cmin) * scale;
+        for axis in 0..3 {
+            let k = (f[axis] as usize).min(BINS - 1);
+            let bin = &mut bins[axis][k];
+            bin.count += 1;
+            bin.b.grow(c);
+        }
+    }
+    bins
+}
+
+fn merge_bins(mut a: [[Bin; BINS]; 3], b: [[Bin; BINS]; 3]) -> [[Bin; BINS]; 3] {
+    for axis in 0..3 {
+        for k in 0..BINS {
+            a[axis][k].count += b[axis][k].count;
+            a[axis][k].b = a[axis][k].b.union(b[axis][k].b);
+        }
+    }
+    a
+}
+
+/// Builds the subtree over `items` (whose first item is sphere slot `base`; `cb` their centre
+/// bounds). Splits are binned SAH; degenerate ranges (all centres equal) split at the middle, so
+/// the depth stays ≤ log2(n) + a few and below the traversal stack.
+fn build_node(items: &mut [Item], base: usize, cb: Bounds, r: f32, depth: u32) -> Subtree {
+    let n = items.len();
+    if n <= LEAF_MAX {
+        return Subtree { nodes: Vec::new(), root: LEAF | ((base as u32) << 4) | n as u32 };
+    }
+    let extent = cb.max - cb.min;
+    let mut split = None;
+    // Past depth 64 (pathological distributions) halve by count, which bounds the depth.
+    if extent.max_element() > 0.0 && depth < 64 {
+        let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), Vec3::splat(BINS as f32) / extent, Vec3::ZERO);
+        let bins = if n >= PARALLEL_MIN {
+            use rayon::prelude::*;
+            items.par_chunks(PARALLEL_MIN).map(|c| bin_items(c, cb.min, scale)).reduce(|| [[EMPTY_BIN; BINS]; 3], merge_bins)
+        } else {
+            bin_items(items, cb.min, scale)
+        };
+        // SAH: sweep from the right, then from the left.
+        let mut best_cost = f32::INFINITY;
+        for axis in 0..3 {
+            if extent[axis] <= 0.0 {
+                continue;
+            }
+            let b = &bins[axis];
+            let mut right_area = [0f32; BINS];
+            let mut right_bounds = [Bounds::EMPTY; BINS];
+            let mut acc = Bounds::EMPTY;
+            let mut count = 0u32;
+            let mut right_count = [0u32; BINS];
+            for k in (1..BINS).rev() {
+                acc = acc.union(b[k].b);
+                count += b[k].count;
+                right_area[k] = acc.half_area(r);
+                right_bounds[k] = acc;
+                right_count[k] = count;
+            }
+            let mut lacc = Bounds::EMPTY;
+            let mut lcount = 0u32;
+            for k in 1..BINS {
+                lacc = lacc.union(b[k - 1].b);
+                lcount += b[k - 1].count;
+                if lcount == 0 || right_count[k] == 0 {
+                    continue;
+                }
+                let cost = lacc.half_area(r) * lcount as f32 + right_area[k] * right_count[k] as f32;
+                if cost < best_cost {
+                    best_cost = cost;
+                    split = Some((axis, k, lcount as usize, lacc, right_bounds[k]));
+                }
+            }
+        }
+    }
+    let (mid, lb, rb) = match split {
+        Some((axis, k, lcount, lb, rb)) => {
+            let scale = BINS as f32 / extent[axis];
+            let lo = cb.min[axis];
+            let mid = partition(items, |it| (((it.c[axis] - lo) * scale) as usize).min(BINS - 1) < k);
+            debug_assert_eq!(mid, lcount);
+            (mid, lb, rb)
+        }
+        None => {
+            // All centres equal (or no useful split): halve by count.
+            let mid = n / 2;
+            (mid, Bounds::of(&items[..mid]), Bounds::of(&items[mid..]))
+        }
+    };
+    let (left_items, right_items) = items.split_at_mut(mid);
+    let (left, right) = if n >= PARALLEL_MIN {
+        rayon::join(|| build_node(left_items, base, lb, r, depth + 1), || build_node(right_items, base + mid, rb, r, depth + 1))
+    } else {
+        (build_node(left_items, base, lb, r, depth + 1), build_node(right_items, base + mid, rb, r, depth + 1))
+    };
+    // Stitch: this node, then the left subtree, then the right one (depth-first order).
+    let mut nodes = Vec::with_capacity(1 + left.nodes.len() + right.nodes.len());
+    let rr = Vec3::splat(r);
+    let (l0, l1) = (lb.min - rr, lb.max + rr);
+    let (r0, r1) = (rb.min - rr, rb.max + rr);
+    let left_off = 1u32;
+    let right_off = 1 + left.nodes.len() as u32;
+    let fix = |c: u32, off: u32| if c & LEAF != 0 { c } else { c + off };
+    nodes.push(Node {
+        min_x: [l0.x, r0.x],
+        min_y: [l0.y, r0.y],
+        min_z: [l0.z, r0.z],
+        max_x: [l1.x, r1.x],
+        max_y: [l1.y, r1.y],
+        max_z: [l1.z, r1.z],
+        child: [fix(left.root, left_off), fix(right.root, right_off)],
+    });
+    append_offset(&mut nodes, left.nodes, left_off);
+    append_offset(&mut nodes, right.nodes, right_off);
+    Subtree { nodes, root: 0 }
+}
+
+fn append_offset(dst: &mut Vec<Node>, src: Vec<Node>, off: u32) {
+    if off == 0 {
+        dst.extend(src);
+        return;
+    }
+    dst.extend(src.into_iter().map(|mut n| {
+        for c in &mut n.child {
+            if *c & LEAF == 0 {
+                *c += off;
+            }
+        }
+        n
+    }));
+}
+
+/// In-place partition: items for which `left` holds first; returns their count.
+fn partition(items: &mut [Item], left: impl Fn(&Item) -> bool) -> usize {
+    let mut i = 0;
+    let mut j = items.len();
+    loop {
+        while i < j && left(&items[i]) {
+            i += 1;
+        }
+        while i < j && !left(&items[j - 1]) {
+            j -= 1;
+        }
+        if i >= j {
+            return i;
+        }
+        items.swap(i, j - 1);
+        i += 1;
+        j -= 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn perpendicular_form_hits_and_misses() {
+        let o = Vec3::ZERO;
+        let d = Vec3::Z;
+        assert_eq!(ray_sphere(o, d, Vec3::new(0.0, 0.0, 5.0), 1.0, 0.0, 100.0), Some(4.0));
+        assert_eq!(ray_sphere(o, d, Vec3::new(0.0, 1.5, 5.0), 1.0, 0.0, 100.0), None);
+        // From inside: the far side.
+        assert_eq!(ray_sphere(o, d, Vec3::ZERO, 1.0, 0.0, 100.0), Some(1.0));
+        // Behind.
+        assert_eq!(ray_sphere(o, d, Vec3::new(0.0, 0.0, -5.0), 1.0, 0.0, 100.0), None);
+        // Beyond t_max.
+        assert_eq!(ray_sphere(o, d, Vec3::new(0.0, 0.0, 5.0), 1.0, 0.0, 3.9), None);
+        // A 1 mm sphere 10 km away is still found.
+        let t = ray_sphere(o, d, Vec3::new(0.0005, 0.0, 10_000.0), 0.001, 0.0, f32::INFINITY).unwrap();
+        assert!((t - 10_000.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn small_trees_and_duplicates() {
+        assert!(SphereBvh::build(&[], 1.0).unwrap().closest_hit(Vec3::ZERO, Vec3::Z, 0.0, 10.0).is_none());
+        let one = SphereBvh::build(&[Vec3::new(0.0, 0.0, 3.0)], 0.5).unwrap();
+        assert_eq!(one.closest_hit(Vec3::ZERO, Vec3::Z, 0.0, 10.0), Some((2.5, 0)));
+        // 100 identical centres: the lowest index wins the tie.
+        let same = vec![Vec3::new(0.0, 0.0, 3.0); 100];
+        let bvh = SphereBvh::build(&same, 0.5).unwrap();
+        assert_eq!(bvh.closest_hit(Vec3::ZERO, Vec3::Z * 2.0, 0.0, 10.0), Some((1.25, 0)));
+        assert!(matches!(SphereBvh::build(&same, 0.0), Err(SphereBvhError::BadRadius(_))));
+        assert!(matches!(SphereBvh::build(&[Vec3::NAN], 1.0), Err(SphereBvhError::NonFiniteCenter(0))));
+    }
+
+    #[test]
+    fn partition_splits_by_predicate() {
+        let mut items: Vec<Item> = (0..37).map(|i| Item { c: [i as f32, 0.0, 0.0], index: i }).collect();
+        let mid = partition(&mut items, |it| it.index % 3 == 0);
+        assert_eq!(mid, 13);
+        assert!(items[..mid].iter().all(|it| it.index % 3 == 0));
+        assert!(items[mid..].iter().all(|it| it.index % 3 != 0));
+    }
+}
