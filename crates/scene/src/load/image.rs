@@ -1,0 +1,84 @@
+//! PNG / JPEG textures via the `image` crate.
+
+use std::path::Path;
+
+use crate::{ColorSpace, SceneError, Texture};
+
+/// Largest accepted texture side (a 16K texture is already 1 GiB of RGBA8 with mips).
+pub(crate) const MAX_TEXTURE_SIDE: u32 = 16_384;
+
+pub(super) fn load(path: &Path, color_space: ColorSpace) -> Result<Texture, SceneError> {
+    let reader = ::image::ImageReader::open(path).map_err(|e| SceneError::new(path, format!("cannot open texture: {e}")))?;
+    let reader = reader.with_guessed_format().map_err(|e| SceneError::new(path, format!("cannot read texture: {e}")))?;
+    match reader.format() {
+        Some(::image::ImageFormat::Png | ::image::ImageFormat::Jpeg) => {}
+        Some(f) => return Err(SceneError::new(path, format!("unsupported texture format {f:?} (expected PNG or JPEG)"))),
+        None => return Err(SceneError::new(path, "not a PNG or JPEG image (unrecognised contents)")),
+    }
+    let mut limits = ::image::Limits::default();
+    limits.max_image_width = Some(MAX_TEXTURE_SIDE);
+    limits.max_image_height = Some(MAX_TEXTURE_SIDE);
+    let mut reader = reader;
+    reader.limits(limits);
+    let img = reader.decode().map_err(|e| SceneError::new(path, format!("cannot decode texture: {e}")))?;
+    let rgba = img.into_rgba8();
+    let (w, h) = rgba.dimensions();
+    if w == 0 || h == 0 {
+        return Err(SceneError::new(path, "texture has no pixels"));
+    }
+    let texels: Vec<[u8; 4]> = rgba.as_raw().chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+    Ok(Texture::new(texture_name(path), w, h, texels, color_space))
+}
+
+/// The texture's name: its file name.
+pub(crate) fn texture_name(path: &Path) -> String {
+    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+/// Whether an RGBA8 image looks like a tangent-space normal map: blue dominant on average
+/// (flat normals are (128, 128, 255)), as opposed to a grey-scale bump/height map.
+pub(crate) fn looks_like_normal_map(texels: &[[u8; 4]]) -> bool {
+    if texels.is_empty() {
+        return false;
+    }
+    let mut sum = [0u64; 3];
+    for t in texels {
+        for c in 0..3 {
+            sum[c] += t[c] as u64;
+        }
+    }
+    let n = texels.len() as f64;
+    let [r, g, b] = sum.map(|s| s as f64 / n);
+    b > 160.0 && b > r + 40.0 && b > g + 40.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normal_map_detection() {
+        assert!(looks_like_normal_map(&[[128, 128, 255, 255]; 4]));
+        assert!(!looks_like_normal_map(&[[200, 200, 200, 255]; 4]));
+        assert!(!looks_like_normal_map(&[]));
+    }
+
+    #[test]
+    fn png_roundtrip_and_bad_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.png");
+        let img = ::image::RgbaImage::from_fn(4, 2, |x, y| ::image::Rgba([x as u8 * 60, y as u8 * 100, 7, 255]));
+        img.save(&p).unwrap();
+        let t = load(&p, ColorSpace::Srgb).unwrap();
+        assert_eq!((t.width(), t.height()), (4, 2));
+        assert_eq!(t.levels[0].texels[1 * 4 + 3], [180, 100, 7, 255]);
+        assert_eq!(t.name, "t.png");
+
+        let bad = dir.path().join("bad.png");
+        std::fs::write(&bad, b"not an image at all").unwrap();
+        let e = load(&bad, ColorSpace::Srgb).unwrap_err();
+        assert!(e.to_string().contains("bad.png"), "{e}");
+        let e = load(&dir.path().join("missing.jpg"), ColorSpace::Linear).unwrap_err();
+        assert!(e.to_string().contains("missing.jpg") && e.message.contains("cannot open"), "{e}");
+    }
+}
