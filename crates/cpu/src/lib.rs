@@ -2,7 +2,9 @@
 //! and outputs; `frame` calls them in order.
 
 pub mod bvh;
+pub mod lighting;
 pub mod prepare;
+pub mod raster;
 pub mod trace;
 
 pub use prepare::PreparedScene;

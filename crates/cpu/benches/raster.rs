@@ -1,0 +1,145 @@
+//! Raster stage benchmark: a synthetic ~270K-triangle scene (a grid of 117 UV spheres of 2,304
+//! triangles each, half of them textured, plus a floor) into the full G-buffer at 1280×720, and
+//! the deferred lighting pass. Built in code, so it needs no asset files.
+//!
+//! Run: `cargo bench -p hybrid-cpu --bench raster`
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use glam::{Vec2, Vec3};
+use hybrid_core::GBuffer;
+use hybrid_cpu::PreparedScene;
+use hybrid_cpu::lighting::deferred_lighting;
+use hybrid_cpu::raster::{rasterize, rasterize_into};
+use hybrid_scene::{
+    Camera, ColorSpace, DirectionalLight, Environment, HeuristicSettings, Lights, Material, Mesh, Object, ObjectSource, PointLight,
+    Projection, Scene, Skybox, Texture, TraceSettings, Transform,
+};
+
+const W: u32 = 1280;
+const H: u32 = 720;
+
+fn sphere(centre: Vec3, r: f32, slices: u32, stacks: u32, material: usize) -> Mesh {
+    let mut m = Mesh { material, ..Default::default() };
+    for i in 0..=stacks {
+        let phi = i as f32 / stacks as f32 * std::f32::consts::PI;
+        for j in 0..=slices {
+            let th = j as f32 / slices as f32 * std::f32::consts::TAU;
+            let n = Vec3::new(phi.sin() * th.sin(), phi.cos(), phi.sin() * th.cos());
+            m.positions.push(centre + n * r);
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(j as f32 / slices as f32, i as f32 / stacks as f32));
+        }
+    }
+    let cols = slices + 1;
+    for i in 0..stacks {
+        for j in 0..slices {
+            let (a, b) = (i * cols + j, (i + 1) * cols + j);
+            m.indices.push([a, b, b + 1]);
+            m.indices.push([a, b + 1, a + 1]);
+        }
+    }
+    m
+}
+
+fn object(i: usize, mesh: Mesh) -> Object {
+    Object {
+        name: format!("object {i}"),
+        source: ObjectSource::Plane,
+        transform: Transform::default(),
+        meshes: vec![mesh],
+        relevance: 1.0,
+        cost: 1.0,
+    }
+}
+
+fn bench_scene() -> (Scene, Camera) {
+    let mut texels = Vec::new();
+    for y in 0..256 {
+        for x in 0..256 {
+            texels.push(if (x / 32 + y / 32) % 2 == 0 { [220, 60, 40, 255] } else { [30, 120, 220, 255] });
+        }
+    }
+    let tex = Texture::new("checker", 256, 256, texels, ColorSpace::Srgb);
+    let plain = Material { specular: Vec3::splat(0.3), shininess: 0.5, ..Material::default() };
+    let textured = Material { diffuse_map: Some(0), tiling: Vec2::new(4.0, 2.0), ..Material::default() };
+    let mut objects = Vec::new();
+    // 13 × 9 spheres, three depth layers staggered so they overlap (overdraw).
+    for row in 0..9 {
+        for col in 0..13 {
+            let i = row * 13 + col;
+            let c = Vec3::new(col as f32 * 1.5 - 9.0, row as f32 * 1.1 - 4.4, -((i % 3) as f32) * 1.2);
+            objects.push(object(i, sphere(c, 0.75, 48, 24, i % 2)));
+        }
+    }
+    let floor = Mesh {
+        positions: vec![
+            Vec3::new(-40.0, -5.5, 20.0),
+            Vec3::new(40.0, -5.5, 20.0),
+            Vec3::new(40.0, -5.5, -60.0),
+            Vec3::new(-40.0, -5.5, -60.0),
+        ],
+        uvs: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        material: 1,
+        ..Default::default()
+    };
+    objects.push(object(objects.len(), floor));
+    let camera = Camera {
+        position: Vec3::new(0.0, 0.5, 11.0),
+        target: Vec3::new(0.0, 0.0, -1.0),
+        up: Vec3::Y,
+        projection: Projection::Perspective { fov_y_deg: 50.0, near: 0.1, far: 200.0 },
+    };
+    let lights = Lights {
+        directional: vec![DirectionalLight {
+            direction: Vec3::new(-0.3, -1.0, -0.5).normalize(),
+            color: Vec3::ONE,
+            intensity: 1.0,
+            casts_shadows: true,
+        }],
+        point: vec![PointLight {
+            position: Vec3::new(0.0, 4.0, 4.0),
+            color: Vec3::ONE,
+            intensity: 10.0,
+            attenuation: Default::default(),
+            casts_shadows: true,
+        }],
+        spot: Vec::new(),
+    };
+    let scene = Scene {
+        source: None,
+        camera,
+        environment: Environment { ambient: Vec3::splat(0.1), ior: 1.0, skybox: Skybox::Color(Vec3::new(0.4, 0.6, 0.9)) },
+        heuristic: HeuristicSettings::default(),
+        trace: TraceSettings::default(),
+        materials: vec![plain, textured],
+        textures: vec![tex],
+        objects,
+        lights,
+        point_clouds: Vec::new(),
+        camera_path: None,
+    };
+    (scene, camera)
+}
+
+fn raster(c: &mut Criterion) {
+    let (scene, camera) = bench_scene();
+    let prepared = PreparedScene::new(&scene);
+    let tris = prepared.triangles.len();
+    let g = rasterize(&prepared, &camera, W, H, None);
+    let covered = g.object_id.iter().filter(|&&o| o != hybrid_core::NO_OBJECT).count();
+    eprintln!("raster bench: {tris} triangles, {W}x{H}, {covered} pixels covered");
+
+    let mut group = c.benchmark_group("raster");
+    group.sample_size(20);
+    group.bench_function("rasterize_into_270k_tris_1280x720", |b| {
+        let mut g = GBuffer::new(W, H);
+        b.iter(|| rasterize_into(&prepared, &camera, None, &mut g));
+    });
+    group.bench_function("rasterize_alloc_270k_tris_1280x720", |b| b.iter(|| rasterize(&prepared, &camera, W, H, None)));
+    group.bench_function("deferred_lighting_1280x720", |b| b.iter(|| deferred_lighting(&g, &scene, &camera)));
+    group.finish();
+}
+
+criterion_group!(benches, raster);
+criterion_main!(benches);

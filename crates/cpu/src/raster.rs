@@ -1,0 +1,993 @@
+//! Stage 1, `raster` (paper 1 §3.1, listings 1–3): every triangle of the prepared scene into the
+//! deferred G-buffer, merged by depth with the RT layer of paper 2 (block U).
+//!
+//! How it works, in three passes:
+//! 1. **Vertices**: every world vertex through the camera's view-projection (reversed-Z), then
+//!    projected and snapped to 1/256 pixel, with outcodes against the frustum and the clip planes.
+//! 2. **Setup and binning** (parallel over fixed chunks of the scene's triangle list): trivial
+//!    reject; triangles crossing the near plane (or leaving the guard band) are clipped in clip
+//!    space *before* the divide; each screen triangle gets the perspective planes of its source
+//!    triangle (`b_i/w` as affine functions of the pixel position, from the inverse of the
+//!    homogeneous vertex matrix) and is binned into horizontal bands of [`BAND_ROWS`] rows.
+//! 3. **Bands** (parallel): each band owns its rows of every target. It writes the RT layer's
+//!    depth first (so polygons must be nearer, depth test Greater), rasterises its bin in scene
+//!    triangle order with integer edge functions and the top-left rule into a local visibility
+//!    buffer (triangle id + depth), then shades only the winner of each pixel with
+//!    [`PreparedScene::surface_at`] (deferred: no cost for overdraw).
+//!
+//! Output is bit-identical for any number of threads: chunking and banding are fixed, each
+//! band runs its triangles in scene order, and equal depths keep the earlier triangle.
+
+use glam::{DMat3, DMat4, DVec3, Mat4, Vec3, Vec4};
+use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
+use hybrid_scene::Camera;
+use rayon::prelude::*;
+
+use crate::prepare::PreparedScene;
+
+/// Rows per band (the unit of parallel work and of binning).
+pub const BAND_ROWS: u32 = 16;
+/// Sub-pixel precision of snapped vertex positions (1/256 pixel).
+const SUB_BITS: u32 = 8;
+const SUB: i64 = 1 << SUB_BITS;
+const HALF: i64 = SUB / 2;
+/// Guard band in pixels beyond each image border: triangles reaching further are clipped, so
+/// fixed-point coordinates stay small enough for exact `i64` edge functions.
+const GUARD_PX: f32 = 8192.0;
+/// Triangles per setup task (fixed, so binning order never depends on the thread count).
+const SETUP_CHUNK: usize = 8192;
+
+/// Visibility-buffer ids: nothing drawn / RT layer visible.
+const VIS_NONE: u32 = u32::MAX;
+const VIS_RT: u32 = u32::MAX - 1;
+
+// Outcode bits: outside the view frustum (for trivial rejection) and outside the clip planes
+// (near + guard band; these need clipping before the divide).
+const OUT_RIGHT: u32 = 1;
+const OUT_LEFT: u32 = 2;
+const OUT_TOP: u32 = 4;
+const OUT_BOTTOM: u32 = 8;
+const OUT_NEAR: u32 = 16;
+const OUT_FAR: u32 = 32;
+const CLIP_NEAR: u32 = 64;
+const CLIP_RIGHT: u32 = 128;
+const CLIP_LEFT: u32 = 256;
+const CLIP_TOP: u32 = 512;
+const CLIP_BOTTOM: u32 = 1024;
+const INVALID: u32 = 2048;
+const FRUSTUM: u32 = OUT_RIGHT | OUT_LEFT | OUT_TOP | OUT_BOTTOM | OUT_NEAR | OUT_FAR;
+const CLIP: u32 = CLIP_NEAR | CLIP_RIGHT | CLIP_LEFT | CLIP_TOP | CLIP_BOTTOM;
+
+/// Rasterises the prepared scene into a new G-buffer of `width × height` (row 0 at the top).
+///
+/// `rt_layer` (paper 2, block U): where its depth is > 0 it is written into the depth buffer
+/// before any polygon; polygons win only where they are nearer (reversed-Z Greater). Pixels
+/// where it stays visible get [`RT_SCENE_OBJECT`] and [`rt_surface`]. A layer of another size
+/// is ignored (with a warning).
+pub fn rasterize(prepared: &PreparedScene, camera: &Camera, width: u32, height: u32, rt_layer: Option<&RtLayer>) -> GBuffer {
+    let mut g = GBuffer::new(width, height);
+    raster_into(prepared, camera, rt_layer, &mut g, false);
+    g
+}
+
+/// As [`rasterize`], into an existing G-buffer (its size is the frame size): every pixel of every
+/// target is overwritten (mask cleared to 0), so a buffer can be reused frame after frame.
+pub fn rasterize_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLayer>, gbuffer: &mut GBuffer) {
+    raster_into(prepared, camera, rt_layer, gbuffer, true);
+}
+
+/// Depth merge of the RT layer into a finished G-buffer (used where the G-buffer comes from
+/// primary rays, `rt-only`): wherever the layer's depth is Greater than the G-buffer's, the pixel
+/// becomes the RT-scene's ([`RT_SCENE_OBJECT`], [`rt_surface`]). Same result as passing the layer
+/// to [`rasterize`]. A layer of another size is ignored (with a warning).
+pub fn merge_rt_layer(gbuffer: &mut GBuffer, layer: &RtLayer, camera: &Camera) {
+    let (w, h) = (gbuffer.width, gbuffer.height);
+    if !layer_fits(layer, w, h) {
+        return;
+    }
+    let unproject = Unproject::new(camera, w, h);
+    for i in 0..gbuffer.len() {
+        let d = layer.depth[i];
+        if d > 0.0 && d > gbuffer.depth[i] {
+            let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
+            let s = unproject.rt_surface(x, y, d, layer.color[i]);
+            gbuffer.write(i, RT_SCENE_OBJECT, d, &s);
+        }
+    }
+}
+
+/// The G-buffer surface of an RT-layer pixel: emission = its colour (so deferred lighting
+/// reproduces it), no other reflectance, opaque, IOR 1; position = the pixel centre at `depth`
+/// unprojected with the inverse view-projection; normal = unit vector towards the camera.
+pub fn rt_surface(camera: &Camera, width: u32, height: u32, x: u32, y: u32, depth: f32, color: Vec3) -> Surface {
+    Unproject::new(camera, width, height).rt_surface(x, y, depth, color)
+}
+
+fn layer_fits(layer: &RtLayer, w: u32, h: u32) -> bool {
+    let n = w as usize * h as usize;
+    let ok = layer.width == w && layer.height == h && layer.depth.len() == n && layer.color.len() == n;
+    if !ok {
+        tracing::warn!(layer_w = layer.width, layer_h = layer.height, w, h, "RT layer size differs from the frame; ignored");
+    }
+    ok
+}
+
+struct Unproject {
+    inv_vp: DMat4,
+    width: f64,
+    height: f64,
+    camera_pos: Vec3,
+    back: Vec3,
+    orthographic: bool,
+}
+
+impl Unproject {
+    fn new(camera: &Camera, width: u32, height: u32) -> Self {
+        let aspect = width as f32 / height.max(1) as f32;
+        Self {
+            inv_vp: camera.view_projection(aspect).as_dmat4().inverse(),
+            width: width as f64,
+            height: height as f64,
+            camera_pos: camera.position,
+            back: -camera.forward(),
+            orthographic: camera.is_orthographic(),
+        }
+    }
+
+    fn rt_surface(&self, x: u32, y: u32, depth: f32, color: Vec3) -> Surface {
+        let ndc = DVec3::new((x as f64 + 0.5) / self.width * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / self.height * 2.0, depth as f64);
+        let p = self.inv_vp.project_point3(ndc).as_vec3();
+        let normal = if self.orthographic { self.back } else { (self.camera_pos - p).normalize_or(self.back) };
+        Surface {
+            position: p,
+            normal,
+            emission: color,
+            ambient: Vec3::ZERO,
+            diffuse: Vec3::ZERO,
+            opacity: 1.0,
+            specular: Vec3::ZERO,
+            shininess: 0.0,
+            reflectivity: 0.0,
+            ior: 1.0,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pass 1: vertices.
+
+/// Frame constants of the setup.
+#[derive(Clone, Copy)]
+struct Viewport {
+    vp: Mat4,
+    width: u32,
+    height: u32,
+    /// Guard-band extent in NDC (|x/w| ≤ gx).
+    gx: f32,
+    gy: f32,
+}
+
+/// A vertex in clip space with its snapped screen position (valid when no `CLIP` bit is set).
+#[derive(Clone, Copy, Default)]
+struct PVert {
+    clip: Vec4,
+    fx: i32,
+    fy: i32,
+    code: u32,
+}
+
+impl Viewport {
+    fn clip_of(&self, p: Vec3) -> Vec4 {
+        self.vp * p.extend(1.0)
+    }
+
+    fn outcode(&self, c: Vec4) -> u32 {
+        if !c.is_finite() {
+            return INVALID | FRUSTUM;
+        }
+        let mut code = 0;
+        if c.x > c.w {
+            code |= OUT_RIGHT;
+        }
+        if c.x < -c.w {
+            code |= OUT_LEFT;
+        }
+        if c.y > c.w {
+            code |= OUT_TOP;
+        }
+        if c.y < -c.w {
+            code |= OUT_BOTTOM;
+        }
+        // Reversed-Z: nearer than the near plane ⇔ z > w; beyond the far plane ⇔ z < 0.
+        if c.z > c.w {
+            code |= OUT_NEAR | CLIP_NEAR;
+        }
+        if c.z < 0.0 {
+            code |= OUT_FAR;
+        }
+        if c.x > self.gx * c.w {
+            code |= CLIP_RIGHT;
+        }
+        if c.x < -self.gx * c.w {
+            code |= CLIP_LEFT;
+        }
+        if c.y > self.gy * c.w {
+            code |= CLIP_TOP;
+        }
+        if c.y < -self.gy * c.w {
+            code |= CLIP_BOTTOM;
+        }
+        code
+    }
+
+    /// Snapped fixed-point screen position of a clip-space point inside the clip planes.
+    /// Used for every vertex (original or made by clipping), so shared vertices snap identically.
+    #[inline]
+    fn snap(&self, c: Vec4) -> (i32, i32) {
+        let inv_w = 1.0 / c.w;
+        let sx = (c.x * inv_w * 0.5 + 0.5) * self.width as f32;
+        let sy = (0.5 - c.y * inv_w * 0.5) * self.height as f32;
+        ((sx * SUB as f32).round() as i32, (sy * SUB as f32).round() as i32)
+    }
+
+    fn vertex(&self, p: Vec3) -> PVert {
+        let clip = self.clip_of(p);
+        let code = self.outcode(clip);
+        let (fx, fy) = if code & (CLIP | INVALID) == 0 { self.snap(clip) } else { (0, 0) };
+        PVert { clip, fx, fy, code }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pass 2: setup and binning.
+
+/// What the band rasteriser needs of a screen triangle (counter-clockwise in fixed point).
+#[derive(Clone, Copy, Debug)]
+struct RasterTri {
+    /// Snapped vertices, 1/256 pixel, positive orientation.
+    v: [[i32; 2]; 3],
+    /// Pixel-centre range covered by the bounding box (inclusive, clamped to the image).
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+    /// Depth plane: reversed-Z depth at pixel centre (x0, y0) and per pixel in x and y.
+    z0: f32,
+    dzdx: f32,
+    dzdy: f32,
+}
+
+/// What the shading pass needs: the source triangle and its perspective planes `b_i / w`,
+/// each as value at the reference pixel centre (x0 + 0.5, y0 + 0.5) and gradient per pixel.
+#[derive(Clone, Copy, Debug)]
+struct ShadeTri {
+    triangle: u32,
+    ref_px: [f32; 2],
+    /// Per corner i: (b_i/w at the reference, d/dx, d/dy).
+    planes: [Vec3; 3],
+}
+
+impl ShadeTri {
+    /// Perspective-correct barycentrics at continuous pixel position (px, py), or `None` when the
+    /// planes give no point in front of the camera there (only possible when extrapolating).
+    #[inline]
+    fn bary(&self, px: f32, py: f32) -> Option<Vec3> {
+        let d = Vec3::new(1.0, px - self.ref_px[0], py - self.ref_px[1]);
+        let bw = Vec3::new(self.planes[0].dot(d), self.planes[1].dot(d), self.planes[2].dot(d));
+        let sum = bw.x + bw.y + bw.z;
+        let b = bw / sum;
+        (sum.is_finite() && sum != 0.0 && b.is_finite()).then_some(b)
+    }
+}
+
+/// One setup task's output: its screen triangles in scene order and their band bins.
+struct Chunk {
+    raster: Vec<RasterTri>,
+    shade: Vec<ShadeTri>,
+    /// `entries[band_start[b]..band_start[b + 1]]`: indices into `raster` touching band `b`.
+    band_start: Vec<u32>,
+    entries: Vec<u32>,
+}
+
+impl Chunk {
+    fn bin(&self, band: usize) -> &[u32] {
+        &self.entries[self.band_start[band] as usize..self.band_start[band + 1] as usize]
+    }
+}
+
+/// A screen-space vertex of a (possibly clipped) triangle.
+#[derive(Clone, Copy)]
+struct ClipVert {
+    c: Vec4,
+}
+
+fn setup_chunk(first: usize, prepared: &PreparedScene, verts: &[Vec<PVert>], vpt: &Viewport, bands: usize) -> Chunk {
+    let end = (first + SETUP_CHUNK).min(prepared.triangles.len());
+    let mut raster = Vec::new();
+    let mut shade = Vec::new();
+    for (g, t) in prepared.triangles[first..end].iter().enumerate() {
+        let g = (first + g) as u32;
+        let mesh = &prepared.meshes[t.mesh as usize];
+        let idx = mesh.indices[t.triangle as usize];
+        let mv = &verts[t.mesh as usize];
+        let (Some(a), Some(b), Some(c)) = (mv.get(idx[0] as usize), mv.get(idx[1] as usize), mv.get(idx[2] as usize)) else {
+            continue;
+        };
+        if a.code & b.code & c.code & FRUSTUM != 0 || (a.code | b.code | c.code) & INVALID != 0 {
+            continue;
+        }
+        let clip = [a.clip, b.clip, c.clip];
+        if (a.code | b.code | c.code) & CLIP == 0 {
+            let tri = [[a.fx, a.fy], [b.fx, b.fy], [c.fx, c.fy]];
+            if let Some(rt) = coverage(tri, vpt) {
+                // Planes are only built for triangles that cover a pixel centre.
+                if let Some((rt, st)) = planes(rt, clip, g, vpt) {
+                    raster.push(rt);
+                    shade.push(st);
+                }
+            }
+        } else {
+            let mut poly = [ClipVert { c: Vec4::ZERO }; 9];
+            let n = clip_polygon(&mut poly, clip, a.code | b.code | c.code, vpt);
+            for k in 1..n.saturating_sub(1) {
+                let tri = [poly[0], poly[k], poly[k + 1]].map(|v| {
+                    let (x, y) = vpt.snap(v.c);
+                    [x, y]
+                });
+                if let Some(rt) = coverage(tri, vpt)
+                    && let Some((rt, st)) = planes(rt, clip, g, vpt)
+                {
+                    raster.push(rt);
+                    shade.push(st);
+                }
+            }
+        }
+    }
+    // Bin: counting sort by band, keeping scene order inside each band.
+    let mut band_start = vec![0u32; bands + 1];
+    for t in &raster {
+        for b in (t.y0 / BAND_ROWS)..=(t.y1 / BAND_ROWS) {
+            band_start[b as usize + 1] += 1;
+        }
+    }
+    for b in 0..bands {
+        band_start[b + 1] += band_start[b];
+    }
+    let mut fill = band_start.clone();
+    let mut entries = vec![0u32; band_start[bands] as usize];
+    for (i, t) in raster.iter().enumerate() {
+        for b in (t.y0 / BAND_ROWS)..=(t.y1 / BAND_ROWS) {
+            entries[fill[b as usize] as usize] = i as u32;
+            fill[b as usize] += 1;
+        }
+    }
+    Chunk { raster, shade, band_start, entries }
+}
+
+/// Sutherland–Hodgman clipping of a triangle against the planes named in `code` (near first,
+/// then the guard band). Intersections are always computed from the inside endpoint, so an edge
+/// shared by two triangles is cut at bit-identical points. Returns the vertex count.
+fn clip_polygon(out: &mut [ClipVert; 9], tri: [Vec4; 3], code: u32, vpt: &Viewport) -> usize {
+    let (gx, gy) = (vpt.gx, vpt.gy);
+    let planes: [(u32, Vec4); 5] = [
+        (CLIP_NEAR, Vec4::new(0.0, 0.0, -1.0, 1.0)),
+        (CLIP_RIGHT, Vec4::new(-1.0, 0.0, 0.0, gx)),
+        (CLIP_LEFT, Vec4::new(1.0, 0.0, 0.0, gx)),
+        (CLIP_TOP, Vec4::new(0.0, -1.0, 0.0, gy)),
+        (CLIP_BOTTOM, Vec4::new(0.0, 1.0, 0.0, gy)),
+    ];
+    let mut cur = [ClipVert { c: Vec4::ZERO }; 9];
+    let mut n = 3;
+    for (i, c) in tri.iter().enumerate() {
+        cur[i] = ClipVert { c: *c };
+    }
+    for (bit, plane) in planes {
+        if code & bit == 0 {
+            continue;
+        }
+        let mut m = 0;
+        for i in 0..n {
+            let (p, q) = (cur[i], cur[(i + 1) % n]);
+            let (dp, dq) = (plane.dot(p.c), plane.dot(q.c));
+            let (p_in, q_in) = (dp >= 0.0, dq >= 0.0);
+            if p_in {
+                out[m] = p;
+                m += 1;
+            }
+            if p_in != q_in && m < out.len() {
+                let (inside, outside, di, dout) = if p_in { (p, q, dp, dq) } else { (q, p, dq, dp) };
+                let t = di / (di - dout);
+                out[m] = ClipVert { c: inside.c + (outside.c - inside.c) * t };
+                m += 1;
+            }
+        }
+        n = m;
+        cur[..n].copy_from_slice(&out[..n]);
+        if n < 3 {
+            return 0;
+        }
+    }
+    out[..n].copy_from_slice(&cur[..n]);
+    // Clipped vertices must be in front of the camera and finite to be projected.
+    if cur[..n].iter().any(|v| v.c.w <= 0.0 || !v.c.is_finite()) {
+        return 0;
+    }
+    n
+}
+
+/// Coverage part of the setup: orientation, bounding box of pixel centres. `None` when the
+/// triangle has no area or covers no pixel centre.
+#[inline]
+fn coverage(mut v: [[i32; 2]; 3], vpt: &Viewport) -> Option<RasterTri> {
+    let min_x = v[0][0].min(v[1][0]).min(v[2][0]) as i64;
+    let max_x = v[0][0].max(v[1][0]).max(v[2][0]) as i64;
+    let min_y = v[0][1].min(v[1][1]).min(v[2][1]) as i64;
+    let max_y = v[0][1].max(v[1][1]).max(v[2][1]) as i64;
+    // Pixel x is covered by the box when its centre x·SUB + HALF lies in [min, max].
+    let x0 = (min_x - HALF + SUB - 1).div_euclid(SUB).max(0);
+    let x1 = (max_x - HALF).div_euclid(SUB).min(vpt.width as i64 - 1);
+    let y0 = (min_y - HALF + SUB - 1).div_euclid(SUB).max(0);
+    let y1 = (max_y - HALF).div_euclid(SUB).min(vpt.height as i64 - 1);
+    if x0 > x1 || y0 > y1 {
+        return None;
+    }
+    let det = area2(v);
+    if det == 0 {
+        return None;
+    }
+    if det < 0 {
+        v.swap(1, 2);
+    }
+    Some(RasterTri { v, x0: x0 as u32, x1: x1 as u32, y0: y0 as u32, y1: y1 as u32, z0: 0.0, dzdx: 0.0, dzdy: 0.0 })
+}
+
+/// Twice the signed area of a fixed-point triangle (positive = the orientation we raster).
+#[inline]
+fn area2(v: [[i32; 2]; 3]) -> i64 {
+    let [[x0, y0], [x1, y1], [x2, y2]] = v.map(|p| p.map(i64::from));
+    (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+}
+
+/// Perspective planes of the source triangle (clip-space corners `clip`) in pixel coordinates:
+/// `b_i / w = P_i · (px, py, 1)` with `P = M⁻¹ S`, M the homogeneous (x, y, w) corner matrix and
+/// S the pixel → NDC map. Valid for any corner signs of w, so clipped pieces share the planes.
+/// Depth (z/w, reversed-Z) is `Σ z_i P_i`, affine in screen space.
+fn planes(mut rt: RasterTri, clip: [Vec4; 3], triangle: u32, vpt: &Viewport) -> Option<(RasterTri, ShadeTri)> {
+    let m = DMat3::from_cols(
+        DVec3::new(clip[0].x as f64, clip[0].y as f64, clip[0].w as f64),
+        DVec3::new(clip[1].x as f64, clip[1].y as f64, clip[1].w as f64),
+        DVec3::new(clip[2].x as f64, clip[2].y as f64, clip[2].w as f64),
+    );
+    let det = m.determinant();
+    if !det.is_normal() {
+        return None;
+    }
+    let inv = m.inverse();
+    let (w, h) = (vpt.width as f64, vpt.height as f64);
+    // (X, Y, 1) = S (px, py, 1): X = 2 px / w − 1, Y = 1 − 2 py / h.
+    let s = DMat3::from_cols(DVec3::new(2.0 / w, 0.0, 0.0), DVec3::new(0.0, -2.0 / h, 0.0), DVec3::new(-1.0, 1.0, 1.0));
+    let p = (inv * s).transpose(); // columns = rows of M⁻¹ S = the planes (a, b, c) of b_i / w
+    let (rx, ry) = (rt.x0 as f64 + 0.5, rt.y0 as f64 + 0.5);
+    let plane = |a: DVec3| DVec3::new(a.x * rx + a.y * ry + a.z, a.x, a.y);
+    let pl = [plane(p.x_axis), plane(p.y_axis), plane(p.z_axis)];
+    let z = pl[0] * clip[0].z as f64 + pl[1] * clip[1].z as f64 + pl[2] * clip[2].z as f64;
+    if !z.is_finite() || !pl.iter().all(|q| q.is_finite()) {
+        return None;
+    }
+    rt.z0 = z.x as f32;
+    rt.dzdx = z.y as f32;
+    rt.dzdy = z.z as f32;
+    let st = ShadeTri { triangle, ref_px: [rx as f32, ry as f32], planes: pl.map(|q| q.as_vec3()) };
+    Some((rt, st))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pass 3: bands.
+
+/// The edge functions of a screen triangle in fixed point, with the top-left rule folded into
+/// the constant: a pixel centre is covered when all three are ≥ 0.
+#[derive(Clone, Copy, Debug)]
+struct Edges {
+    a: [i64; 3],
+    b: [i64; 3],
+    c: [i64; 3],
+}
+
+impl Edges {
+    #[inline]
+    fn new(v: [[i32; 2]; 3]) -> Self {
+        let mut e = Edges { a: [0; 3], b: [0; 3], c: [0; 3] };
+        for k in 0..3 {
+            let [ax, ay] = v[k].map(i64::from);
+            let [bx, by] = v[(k + 1) % 3].map(i64::from);
+            // E(p) = (b − a) × (p − a) = A·px + B·py + C, positive inside (positive orientation).
+            let (a, b) = (ay - by, bx - ax);
+            let c = ax * by - ay * bx;
+            // Top-left rule (row 0 at the top): pixels exactly on a left edge (inside to the
+            // right, A > 0) or a top edge (horizontal, inside below, B > 0) are covered; on any
+            // other edge they belong to the neighbour, so E must be > 0, i.e. E − 1 ≥ 0.
+            let top_left = a > 0 || (a == 0 && b > 0);
+            e.a[k] = a;
+            e.b[k] = b;
+            e.c[k] = if top_left { c } else { c - 1 };
+        }
+        e
+    }
+
+    /// Edge values at the centre of pixel (x, y).
+    #[inline]
+    fn at(&self, x: u32, y: u32) -> [i64; 3] {
+        let (px, py) = (x as i64 * SUB + HALF, y as i64 * SUB + HALF);
+        [0, 1, 2].map(|k| self.a[k] * px + self.b[k] * py + self.c[k])
+    }
+}
+
+/// Calls `hit(x, y)` for every pixel centre of rows `rows` covered by `t` (top-left rule).
+#[inline]
+fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnMut(u32, u32)) {
+    let y_start = t.y0.max(rows.start);
+    let y_end = (t.y1 + 1).min(rows.end);
+    if y_start >= y_end {
+        return;
+    }
+    let e = Edges::new(t.v);
+    let step = [e.a[0] * SUB, e.a[1] * SUB, e.a[2] * SUB];
+    let mut row = e.at(t.x0, y_start);
+    for y in y_start..y_end {
+        let [mut e0, mut e1, mut e2] = row;
+        for x in t.x0..=t.x1 {
+            if (e0 | e1 | e2) >= 0 {
+                hit(x, y);
+            }
+            e0 += step[0];
+            e1 += step[1];
+            e2 += step[2];
+        }
+        for (r, b) in row.iter_mut().zip(e.b) {
+            *r += b * SUB;
+        }
+    }
+}
+
+/// One band's rows of every G-buffer target (the band's slices of the frame's vectors).
+struct BandRows<'a> {
+    position: &'a mut [Vec3],
+    normal: &'a mut [Vec3],
+    emission: &'a mut [Vec3],
+    ambient: &'a mut [Vec3],
+    diffuse: &'a mut [Vec4],
+    specular: &'a mut [Vec4],
+    optical: &'a mut [Vec3],
+    object_id: &'a mut [u32],
+    mask: &'a mut [f32],
+    depth: &'a mut [f32],
+}
+
+impl BandRows<'_> {
+    /// Exactly what [`GBuffer::write`] does, for a band's slices (a test checks they agree).
+    #[inline]
+    fn write(&mut self, i: usize, object_id: u32, depth: f32, s: &Surface) {
+        self.position[i] = s.position;
+        self.normal[i] = s.normal;
+        self.emission[i] = s.emission;
+        self.ambient[i] = s.ambient;
+        self.diffuse[i] = s.diffuse.extend(s.opacity);
+        self.specular[i] = s.specular.extend(s.shininess);
+        self.optical[i] = Vec3::new(s.reflectivity, s.ior, s.opacity);
+        self.object_id[i] = object_id;
+        self.depth[i] = depth;
+    }
+
+    /// What [`GBuffer::new`] holds in a pixel (a test checks they agree).
+    #[inline]
+    fn clear(&mut self, i: usize) {
+        self.position[i] = Vec3::ZERO;
+        self.normal[i] = Vec3::ZERO;
+        self.emission[i] = Vec3::ZERO;
+        self.ambient[i] = Vec3::ZERO;
+        self.diffuse[i] = Vec4::ZERO;
+        self.specular[i] = Vec4::ZERO;
+        self.optical[i] = Vec3::ZERO;
+        self.object_id[i] = NO_OBJECT;
+        self.mask[i] = 0.0;
+        self.depth[i] = 0.0;
+    }
+}
+
+fn split_bands(g: &mut GBuffer, band_len: usize) -> Vec<BandRows<'_>> {
+    let mut position = g.position.chunks_mut(band_len);
+    let mut normal = g.normal.chunks_mut(band_len);
+    let mut emission = g.emission.chunks_mut(band_len);
+    let mut ambient = g.ambient.chunks_mut(band_len);
+    let mut diffuse = g.diffuse.chunks_mut(band_len);
+    let mut specular = g.specular.chunks_mut(band_len);
+    let mut optical = g.optical.chunks_mut(band_len);
+    let mut object_id = g.object_id.chunks_mut(band_len);
+    let mut mask = g.mask.chunks_mut(band_len);
+    let mut depth = g.depth.chunks_mut(band_len);
+    let mut out = Vec::new();
+    while let (
+        Some(position),
+        Some(normal),
+        Some(emission),
+        Some(ambient),
+        Some(diffuse),
+        Some(specular),
+        Some(optical),
+        Some(object_id),
+        Some(mask),
+        Some(depth),
+    ) = (
+        position.next(),
+        normal.next(),
+        emission.next(),
+        ambient.next(),
+        diffuse.next(),
+        specular.next(),
+        optical.next(),
+        object_id.next(),
+        mask.next(),
+        depth.next(),
+    ) {
+        out.push(BandRows { position, normal, emission, ambient, diffuse, specular, optical, object_id, mask, depth });
+    }
+    out
+}
+
+fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLayer>, g: &mut GBuffer, clear: bool) {
+    let (width, height) = (g.width, g.height);
+    let n = g.len();
+    if width == 0 || height == 0 || n != width as usize * height as usize {
+        return;
+    }
+    let rt_layer = rt_layer.filter(|l| layer_fits(l, width, height));
+    let vpt = Viewport {
+        vp: camera.view_projection(width as f32 / height as f32),
+        width,
+        height,
+        gx: 1.0 + 2.0 * GUARD_PX / width as f32,
+        gy: 1.0 + 2.0 * GUARD_PX / height as f32,
+    };
+
+    // Pass 1: vertices.
+    let verts: Vec<Vec<PVert>> =
+        prepared.meshes.par_iter().map(|m| m.positions.par_iter().with_min_len(4096).map(|p| vpt.vertex(*p)).collect()).collect();
+
+    // Pass 2: setup and binning, in fixed chunks of the scene's triangle order.
+    let bands = height.div_ceil(BAND_ROWS) as usize;
+    let chunk_starts: Vec<usize> = (0..prepared.triangles.len()).step_by(SETUP_CHUNK).collect();
+    let chunks: Vec<Chunk> = chunk_starts.par_iter().map(|&first| setup_chunk(first, prepared, &verts, &vpt, bands)).collect();
+    let mut offsets = Vec::with_capacity(chunks.len() + 1);
+    offsets.push(0u32);
+    for c in &chunks {
+        offsets.push(offsets[offsets.len() - 1] + c.raster.len() as u32);
+    }
+
+    // Pass 3: bands (visibility, then shading of the winners).
+    let unproject = Unproject::new(camera, width, height);
+    let w = width as usize;
+    let band_len = w * BAND_ROWS as usize;
+    let rows = split_bands(g, band_len);
+    let ctx = BandContext { prepared, chunks: &chunks, offsets: &offsets, rt_layer, unproject: &unproject, width, height, clear };
+    rows.into_par_iter()
+        .enumerate()
+        .with_max_len(1)
+        .for_each_init(|| (Vec::<f32>::new(), Vec::<u32>::new()), |(depth, ids), (band, mut out)| ctx.band(band, &mut out, depth, ids));
+}
+
+struct BandContext<'a, 's> {
+    prepared: &'a PreparedScene<'s>,
+    chunks: &'a [Chunk],
+    offsets: &'a [u32],
+    rt_layer: Option<&'a RtLayer>,
+    unproject: &'a Unproject,
+    width: u32,
+    height: u32,
+    clear: bool,
+}
+
+impl BandContext<'_, '_> {
+    fn band(&self, band: usize, out: &mut BandRows, depth: &mut Vec<f32>, ids: &mut Vec<u32>) {
+        let w = self.width as usize;
+        let y_lo = band as u32 * BAND_ROWS;
+        let y_hi = (y_lo + BAND_ROWS).min(self.height);
+        let len = (y_hi - y_lo) as usize * w;
+        let base = y_lo as usize * w;
+        depth.clear();
+        ids.clear();
+        match self.rt_layer {
+            Some(l) => {
+                depth.extend_from_slice(&l.depth[base..base + len]);
+                ids.extend(depth.iter().map(|&d| if d > 0.0 { VIS_RT } else { VIS_NONE }));
+                // Depth 0 is the clear value; negative or NaN layer depths never win.
+                depth.iter_mut().for_each(|d| *d = if *d > 0.0 { *d } else { 0.0 });
+            }
+            None => {
+                depth.resize(len, 0.0);
+                ids.resize(len, VIS_NONE);
+            }
+        }
+
+        // Visibility: scene order, strict Greater → the earlier triangle keeps ties.
+        for (ci, chunk) in self.chunks.iter().enumerate() {
+            let first = self.offsets[ci];
+            for &local in chunk.bin(band) {
+                let t = &chunk.raster[local as usize];
+                let id = first + local;
+                let (z0, dzdx, dzdy) = (t.z0, t.dzdx, t.dzdy);
+                let (rx, ry) = (t.x0, t.y0);
+                for_each_covered(t, y_lo..y_hi, |x, y| {
+                    let z = (z0 + dzdx * (x - rx) as f32 + dzdy * (y - ry) as f32).min(1.0);
+                    let i = (y - y_lo) as usize * w + x as usize;
+                    if z > depth[i] {
+                        depth[i] = z;
+                        ids[i] = id;
+                    }
+                });
+            }
+        }
+
+        // Shading of the winners.
+        for i in 0..len {
+            let (x, y) = ((i % w) as u32, y_lo + (i / w) as u32);
+            match ids[i] {
+                VIS_NONE => {
+                    if self.clear {
+                        out.clear(i);
+                    }
+                }
+                VIS_RT => {
+                    let color = self.rt_layer.map_or(Vec3::ZERO, |l| l.color[base + i]);
+                    out.write(i, RT_SCENE_OBJECT, depth[i], &self.unproject.rt_surface(x, y, depth[i], color));
+                    if self.clear {
+                        out.mask[i] = 0.0;
+                    }
+                }
+                id => {
+                    let ci = self.offsets.partition_point(|&o| o <= id) - 1;
+                    let st = &self.chunks[ci].shade[(id - self.offsets[ci]) as usize];
+                    let (object, s) = self.shade(st, x, y);
+                    out.write(i, object, depth[i], &s);
+                    if self.clear {
+                        out.mask[i] = 0.0;
+                    }
+                }
+            }
+        }
+    }
+
+    /// The surface of the winning triangle at pixel (x, y), with its object id.
+    fn shade(&self, st: &ShadeTri, x: u32, y: u32) -> (u32, Surface) {
+        let p = self.prepared;
+        let t = p.triangles[st.triangle as usize];
+        let mesh = &p.meshes[t.mesh as usize];
+        let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+        // Covered pixels lie inside the snapped triangle; clamp the tiny overshoot of snapping.
+        let b = st.bary(px, py).map_or(Vec3::splat(1.0 / 3.0), |b| {
+            let b = b.max(Vec3::ZERO);
+            let s = b.x + b.y + b.z;
+            if s > 0.0 { b / s } else { Vec3::splat(1.0 / 3.0) }
+        });
+        let footprint = if mesh.uvs.is_empty() || !has_texture(&p.scene.materials[mesh.material]) {
+            0.0
+        } else {
+            let [i0, i1, i2] = mesh.indices[t.triangle as usize].map(|i| i as usize);
+            let uv = |b: Vec3| mesh.uvs[i0] * b.x + mesh.uvs[i1] * b.y + mesh.uvs[i2] * b.z;
+            let at = uv(b);
+            // Screen derivatives of the UV: the same planes one pixel right and one pixel down.
+            let dx = st.bary(px + 1.0, py).map(|b| uv(b).distance(at));
+            let dy = st.bary(px, py + 1.0).map(|b| uv(b).distance(at));
+            let f = match (dx, dy) {
+                (Some(a), Some(b)) => a.max(b),
+                (Some(a), None) | (None, Some(a)) => a,
+                (None, None) => 0.0,
+            };
+            if f.is_finite() { f } else { 0.0 }
+        };
+        (mesh.object, p.surface_at(t, b, footprint))
+    }
+}
+
+fn has_texture(m: &hybrid_scene::Material) -> bool {
+    m.emission_map.is_some()
+        || m.ambient_map.is_some()
+        || m.diffuse_map.is_some()
+        || m.specular_map.is_some()
+        || m.normal_map.is_some()
+        || m.optical_map.is_some()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn vpt(w: u32, h: u32) -> Viewport {
+        Viewport { vp: Mat4::IDENTITY, width: w, height: h, gx: 1.0 + 2.0 * GUARD_PX / w as f32, gy: 1.0 + 2.0 * GUARD_PX / h as f32 }
+    }
+
+    /// Coverage counts of fixed-point triangles on a w × h grid.
+    fn count(tris: &[[[i32; 2]; 3]], w: u32, h: u32) -> Vec<u32> {
+        let v = vpt(w, h);
+        let mut c = vec![0u32; (w * h) as usize];
+        for t in tris {
+            if let Some(rt) = coverage(*t, &v) {
+                for_each_covered(&rt, 0..h, |x, y| c[(y * w + x) as usize] += 1);
+            }
+        }
+        c
+    }
+
+    /// Deterministic pseudo-random numbers (xorshift) for the fuzz-style tests.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+        fn coord(&mut self, max_px: i32) -> i32 {
+            // Half the time exactly on a pixel centre or pixel corner, to hit the tie cases.
+            let px = (self.next() % max_px as u64) as i32;
+            match self.next() % 4 {
+                0 => px * SUB as i32 + HALF as i32,
+                1 => px * SUB as i32,
+                _ => px * SUB as i32 + (self.next() % SUB as u64) as i32,
+            }
+        }
+    }
+
+    /// Is the pixel centre strictly inside or on the boundary of the convex polygon?
+    fn inside_convex(poly: &[[i32; 2]], x: u32, y: u32) -> (bool, bool) {
+        let (px, py) = (x as i64 * SUB + HALF, y as i64 * SUB + HALF);
+        let n = poly.len();
+        let mut sign = 0i64;
+        let mut on_edge = false;
+        for k in 0..n {
+            let [ax, ay] = poly[k].map(i64::from);
+            let [bx, by] = poly[(k + 1) % n].map(i64::from);
+            let e = (bx - ax) * (py - ay) - (by - ay) * (px - ax);
+            if e == 0 {
+                on_edge = true;
+                continue;
+            }
+            if sign == 0 {
+                sign = e.signum();
+            } else if e.signum() != sign {
+                return (false, false);
+            }
+        }
+        (true, on_edge)
+    }
+
+    #[test]
+    fn shared_edge_pixels_are_drawn_exactly_once() {
+        let (w, h) = (40u32, 30u32);
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let mut checked = 0;
+        for _ in 0..400 {
+            let q: Vec<[i32; 2]> = (0..4).map(|_| [rng.coord(w as i32), rng.coord(h as i32)]).collect();
+            // Keep convex quads in consistent order (both diagonals split it into two triangles).
+            let e = |a: [i32; 2], b: [i32; 2], c: [i32; 2]| area2([a, b, c]).signum();
+            let s = e(q[0], q[1], q[2]);
+            if s == 0 || e(q[1], q[2], q[3]) != s || e(q[2], q[3], q[0]) != s || e(q[3], q[0], q[1]) != s {
+                continue;
+            }
+            // Split along the diagonal 0–2; the second triangle in reverse winding too.
+            let tris = [[q[0], q[1], q[2]], [q[2], q[0], q[3]]];
+            let c = count(&tris, w, h);
+            for y in 0..h {
+                for x in 0..w {
+                    let (inside, on_edge) = inside_convex(&q, x, y);
+                    let n = c[(y * w + x) as usize];
+                    assert!(n <= 1, "pixel ({x}, {y}) drawn {n} times for quad {q:?}");
+                    if inside && !on_edge {
+                        assert_eq!(n, 1, "interior pixel ({x}, {y}) missing for quad {q:?}");
+                    }
+                    if !inside {
+                        assert_eq!(n, 0, "outside pixel ({x}, {y}) drawn for quad {q:?}");
+                    }
+                }
+            }
+            checked += 1;
+        }
+        assert!(checked > 50, "too few convex quads generated: {checked}");
+    }
+
+    #[test]
+    fn axis_aligned_square_follows_top_left_rule() {
+        // Square from pixel centre (2.5, 2.5) to (6.5, 6.5): centres on the top and left edges
+        // are in, on the bottom and right edges out → exactly 4 × 4 pixels, x, y in 2..6.
+        let p = |x: i32, y: i32| [x * SUB as i32 + HALF as i32, y * SUB as i32 + HALF as i32];
+        let tris = [[p(2, 2), p(6, 2), p(6, 6)], [p(2, 2), p(6, 6), p(2, 6)]];
+        let c = count(&tris, 10, 10);
+        for y in 0..10u32 {
+            for x in 0..10u32 {
+                let want = u32::from((2..6).contains(&x) && (2..6).contains(&y));
+                assert_eq!(c[(y * 10 + x) as usize], want, "({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn fan_around_shared_vertex_covers_once() {
+        // A fan of triangles around a vertex on a pixel centre, closing the full circle.
+        let (w, h) = (32u32, 32u32);
+        for (cx, cy, n) in [(16i32, 16i32, 7usize), (15, 17, 12), (16, 16, 4)] {
+            let centre = [cx * SUB as i32 + HALF as i32, cy * SUB as i32 + HALF as i32];
+            let rim: Vec<[i32; 2]> = (0..n)
+                .map(|k| {
+                    let a = k as f32 / n as f32 * std::f32::consts::TAU + 0.3;
+                    [centre[0] + (a.cos() * 10.0 * SUB as f32) as i32, centre[1] + (a.sin() * 10.0 * SUB as f32) as i32]
+                })
+                .collect();
+            let tris: Vec<[[i32; 2]; 3]> = (0..n).map(|k| [centre, rim[k], rim[(k + 1) % n]]).collect();
+            let c = count(&tris, w, h);
+            assert_eq!(c[(cy as u32 * w + cx as u32) as usize], 1, "shared vertex pixel, n = {n}");
+            for y in 0..h {
+                for x in 0..w {
+                    let (inside, on_edge) = inside_convex(&rim, x, y);
+                    let k = c[(y * w + x) as usize];
+                    assert!(k <= 1, "({x}, {y}) drawn {k} times");
+                    if inside && !on_edge {
+                        assert_eq!(k, 1, "({x}, {y}) missing");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn band_rows_write_matches_gbuffer_write() {
+        let s = Surface {
+            position: Vec3::new(1.0, 2.0, 3.0),
+            normal: Vec3::Y,
+            emission: Vec3::splat(0.1),
+            ambient: Vec3::splat(0.2),
+            diffuse: Vec3::new(0.3, 0.4, 0.5),
+            opacity: 0.6,
+            specular: Vec3::splat(0.7),
+            shininess: 0.8,
+            reflectivity: 0.9,
+            ior: 1.4,
+        };
+        let mut a = GBuffer::new(3, 2);
+        a.write(4, 7, 0.5, &s);
+        let mut b = GBuffer::new(3, 2);
+        b.mask.iter_mut().for_each(|m| *m = 1.0);
+        {
+            let mut rows = split_bands(&mut b, 6);
+            rows[0].write(4, 7, 0.5, &s);
+            for i in [0, 1, 2, 3, 5] {
+                rows[0].clear(i);
+            }
+            rows[0].mask[4] = 0.0;
+        }
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn clipping_keeps_shared_cut_points_identical() {
+        // Two triangles sharing an edge that crosses the near plane: the cut point on that edge
+        // must be bit-identical in both, whatever the winding.
+        let v = Viewport { vp: Mat4::IDENTITY, width: 64, height: 64, gx: 100.0, gy: 100.0 };
+        let a = Vec4::new(0.1, 0.2, 0.3, 1.0); // inside (z < w)
+        let b = Vec4::new(-0.3, 0.1, 2.0, 0.5); // in front of near (z > w)
+        let c1 = Vec4::new(0.5, -0.5, 0.2, 1.0);
+        let c2 = Vec4::new(-0.5, 0.6, 0.1, 1.0);
+        let mut p1 = [ClipVert { c: Vec4::ZERO }; 9];
+        let mut p2 = [ClipVert { c: Vec4::ZERO }; 9];
+        let n1 = clip_polygon(&mut p1, [a, b, c1], CLIP_NEAR, &v);
+        let n2 = clip_polygon(&mut p2, [b, a, c2], CLIP_NEAR, &v);
+        let cut = |p: &[ClipVert]| -> Vec<[u32; 4]> {
+            p.iter().filter(|q| q.c != a && q.c != c1 && q.c != c2).map(|q| q.c.to_array().map(f32::to_bits)).collect()
+        };
+        let (k1, k2) = (cut(&p1[..n1]), cut(&p2[..n2]));
+        assert_eq!(n1, 4);
+        assert_eq!(n2, 4);
+        assert!(k1.iter().any(|x| k2.contains(x)), "no shared cut point: {k1:?} vs {k2:?}");
+        for q in &p1[..n1] {
+            assert!(q.c.z <= q.c.w * (1.0 + 1e-6), "vertex in front of near after clipping: {}", q.c);
+        }
+    }
+}
