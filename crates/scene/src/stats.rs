@@ -129,6 +129,101 @@ impl fmt::Display for SceneStats {
 mod tests {
     use super::*;
 
+    use glam::Vec3;
+
+    use crate::model::*;
+
+    fn scene() -> Scene {
+        let tri = |material| Mesh { positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y], indices: vec![[0, 1, 2]], material, ..Mesh::default() };
+        let object = |name: &str, meshes, x: f32| Object {
+            name: name.into(),
+            source: ObjectSource::Plane,
+            transform: Transform { position: Vec3::new(x, 0.0, 0.0), ..Transform::default() },
+            meshes,
+            relevance: 1.0,
+            cost: 1.0,
+        };
+        let mirror = Material { reflectivity: 0.5, ..Material::default() };
+        let glass = Material { opacity: 0.1, ..Material::default() };
+        let light =
+            PointLight { position: Vec3::ZERO, color: Vec3::ONE, intensity: 1.0, attenuation: Attenuation::default(), casts_shadows: true };
+        Scene {
+            source: Some("scenes/room.toml".into()),
+            camera: crate::Camera::default(),
+            environment: Environment::default(),
+            heuristic: HeuristicSettings::default(),
+            trace: TraceSettings::default(),
+            materials: vec![Material::default(), mirror, glass],
+            textures: Vec::new(),
+            objects: vec![
+                object("plain", vec![tri(0)], 0.0),
+                object("mirror+glass", vec![tri(1), tri(2), tri(0)], 10.0),
+                object("mirror", vec![tri(1)], -5.0),
+            ],
+            lights: Lights { directional: Vec::new(), point: vec![light; 2], spot: Vec::new() },
+            point_clouds: vec![PointCloud {
+                name: "c".into(),
+                source: "c.ply".into(),
+                points: vec![Vec3::new(0.0, 20.0, 0.0), Vec3::new(1.0, -3.0, 2.0)],
+                colors: Vec::new(),
+                radius: 0.5,
+                coloring: PointColoring::Height,
+                specular: Vec3::ZERO,
+                shininess: 0.0,
+            }],
+            camera_path: None,
+        }
+    }
+
+    #[test]
+    fn counts_and_bounds() {
+        let s = SceneStats::of(&scene());
+        assert_eq!((s.vertices, s.triangles, s.objects), (15, 5, 3));
+        assert_eq!((s.reflective_objects, s.refractive_objects), (2, 1));
+        assert_eq!(s.lights, LightCounts { directional: 0, point: 2, spot: 0 });
+        assert_eq!(s.points, 2);
+        assert_eq!(s.bounds.min, [-5.0, -3.5, -0.5]);
+        assert_eq!(s.bounds.max, [11.0, 20.5, 2.5]);
+        assert_eq!(s.name, "room");
+    }
+
+    #[test]
+    fn json_has_exactly_the_documented_keys() {
+        let v = serde_json::to_value(SceneStats::of(&scene())).unwrap();
+        let keys = |v: &serde_json::Value| {
+            let mut k: Vec<String> = v.as_object().unwrap().keys().cloned().collect();
+            k.sort();
+            k
+        };
+        assert_eq!(
+            keys(&v),
+            ["bounds", "lights", "objects", "points", "reflective_objects", "refractive_objects", "triangles", "vertices"]
+        );
+        assert_eq!(keys(&v["lights"]), ["directional", "point", "spot"]);
+        assert_eq!(keys(&v["bounds"]), ["max", "min"]);
+        assert_eq!(v["bounds"]["min"], serde_json::json!([-5.0, -3.5, -0.5]));
+        assert_eq!(v["triangles"], 5);
+    }
+
+    #[test]
+    fn display_prints_the_table_4_row() {
+        let text = SceneStats::of(&scene()).to_string();
+        let row = text.lines().nth(1).unwrap();
+        let cols: Vec<&str> = row.split_whitespace().collect();
+        assert_eq!(cols, ["room", "5", "3", "2", "1", "2", "2"]);
+        assert!(text.lines().next().unwrap().contains("Triangles"));
+    }
+
+    #[test]
+    fn empty_scene_has_zero_bounds() {
+        let mut sc = scene();
+        sc.objects.clear();
+        sc.point_clouds.clear();
+        let s = SceneStats::of(&sc);
+        assert_eq!(s.bounds, Bounds::default());
+        assert_eq!(s.triangles, 0);
+    }
+
     #[test]
     fn thousands_separators() {
         assert_eq!(thousands(0), "0");
