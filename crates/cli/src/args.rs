@@ -6,7 +6,11 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use hybrid_core::Mode;
 
 #[derive(Debug, Parser)]
-#[command(name = "hybrid", version, about = "Hybrid rasterization + ray tracing renderer (Walewski et al. 2019; Timokhin & Mikhaylyuk depth merge)")]
+#[command(
+    name = "hybrid",
+    version,
+    about = "Hybrid rasterization + ray tracing renderer (Walewski et al. 2019; Timokhin & Mikhaylyuk depth merge)"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,

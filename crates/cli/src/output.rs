@@ -40,7 +40,8 @@ pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
 pub fn write_png_rgba8(path: &Path, width: u32, height: u32, rgba: &[[u8; 4]]) -> Result<(), CliError> {
     let bytes: Vec<u8> = rgba.iter().flatten().copied().collect();
     write_atomically(path, |tmp| {
-        image::save_buffer(tmp, &bytes, width, height, image::ExtendedColorType::Rgba8).map_err(|e| e.to_string())
+        image::save_buffer_with_format(tmp, &bytes, width, height, image::ExtendedColorType::Rgba8, image::ImageFormat::Png)
+            .map_err(|e| e.to_string())
     })
 }
 

@@ -5,7 +5,9 @@
 
 pub mod blend;
 pub mod buffers;
+pub mod depth_merge;
 pub mod frame;
+pub mod report;
 pub mod shading;
 
 pub use buffers::{FrameBuffers, GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};

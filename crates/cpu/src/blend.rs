@@ -12,8 +12,6 @@ pub fn blend(gbuffer: &GBuffer, lighting: &[Vec3], shadow: &[Vec3], reflection: 
     (0..gbuffer.len())
         .into_par_iter()
         .with_min_len(1024)
-        .map(|i| {
-            encode_srgb(blend_pixel(lighting[i], shadow[i], reflection[i], refraction[i], gbuffer.optical[i], gbuffer.mask[i]))
-        })
+        .map(|i| encode_srgb(blend_pixel(lighting[i], shadow[i], reflection[i], refraction[i], gbuffer.optical[i], gbuffer.mask[i])))
         .collect()
 }

@@ -1,0 +1,234 @@
+//! The CPU frame: DESIGN §1's stages called in order. `CpuRenderer::render` is the whole frame
+//! on one screen; each stage lives in its own module with explicit inputs and outputs.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use hybrid_core::depth_merge::{PackedRtFrame, unpack};
+use hybrid_core::report::{CapsuleReport, FrameReport, RayCounts, StageTimings};
+use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RtLayer};
+use hybrid_heuristic::{FrameInput, Heuristic, HeuristicReport, HeuristicSettings, ObjectInput, count_visible_pixels, write_mask};
+use hybrid_scene::{Budget, Camera, Scene};
+
+use crate::bvh::SceneBvh;
+use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, RtCapsule};
+use crate::prepare::PreparedScene;
+use crate::{blend, lighting, raster, trace};
+
+/// Everything one frame produced: the buffers (for the image, dumps and tests) and the report.
+#[derive(Debug)]
+pub struct Frame {
+    pub settings: FrameSettings,
+    pub gbuffer: GBuffer,
+    pub buffers: FrameBuffers,
+    /// The capsule's packed RGBA16UI frame (paper 2), when the scene has point clouds.
+    pub rt_packed: Option<PackedRtFrame>,
+    pub report: FrameReport,
+}
+
+/// The CPU backend with everything it keeps between frames: the prepared scene, its BVH, the
+/// point-cloud capsule and the heuristic's state (S per object, ms per cost unit).
+pub struct CpuRenderer<'s> {
+    scene: &'s Scene,
+    prepared: PreparedScene<'s>,
+    bvh: SceneBvh,
+    capsule: Option<PointCloudCapsule>,
+    heuristic: Heuristic,
+    /// Beyond paper 2: trace the capsule after the raster, with rays clipped at the polygon
+    /// depth. Saves the rays that would end behind polygons, at the cost of running the
+    /// capsule after (not beside) the raster.
+    pub clip_capsule_at_raster_depth: bool,
+}
+
+impl<'s> CpuRenderer<'s> {
+    /// Prepares `scene` once: world-space meshes, the triangle BVH, the capsule's sphere BVH.
+    /// Fails only when a point cloud cannot be built into a sphere BVH.
+    pub fn new(scene: &'s Scene) -> Result<Self, CapsuleError> {
+        let prepared = PreparedScene::new(scene);
+        let bvh = SceneBvh::build(&prepared);
+        let capsule = if scene.point_clouds.is_empty() {
+            None
+        } else {
+            Some(PointCloudCapsule::new(&scene.point_clouds, scene.lights.clone(), scene.environment.clone())?)
+        };
+        Ok(Self { scene, prepared, bvh, capsule, heuristic: Heuristic::new(scene.heuristic.clone()), clip_capsule_at_raster_depth: false })
+    }
+
+    pub fn prepared(&self) -> &PreparedScene<'s> {
+        &self.prepared
+    }
+
+    /// Renders one frame. `on_stage` is told each stage's name as it starts (progress display).
+    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Frame {
+        let frame_start = Instant::now();
+        let mut t = StageTimings::default();
+        let mode = settings.mode;
+
+        on_stage("capsule");
+        let (rt_packed, rt_layer, capsule_report) = timed(&mut t.capsule, || self.capsule_stage(camera, settings, None));
+
+        on_stage("raster");
+        let (mut gbuffer, lighting, primary_rays) = timed(&mut t.raster, || self.raster_stage(camera, settings, rt_layer.as_ref()));
+
+        on_stage("heuristic");
+        let heuristic_report = timed(&mut t.heuristic, || self.heuristic_stage(&mut gbuffer, camera, mode));
+
+        on_stage("trace");
+        let traced = timed(&mut t.trace, || self.trace_stage(&gbuffer, camera, mode));
+
+        on_stage("blend");
+        let final_srgb = timed(&mut t.blend, || blend::blend(&gbuffer, &lighting, &traced.shadow, &traced.reflection, &traced.refraction));
+
+        if mode == Mode::Hybrid {
+            self.heuristic.record_trace(heuristic_report.as_ref().map_or(0.0, |r| r.spent), t.trace);
+        }
+        t.frame = ms_since(frame_start);
+        let rays = RayCounts {
+            primary: primary_rays,
+            shadow: traced.rays.shadow,
+            reflection: traced.rays.reflection,
+            refraction: traced.rays.refraction,
+        };
+        let report = FrameReport {
+            backend: "cpu".into(),
+            size: [settings.width, settings.height],
+            mode,
+            timings_ms: t,
+            rays,
+            triangles: self.prepared.triangles.len() as u64,
+            objects: self.scene.objects.len() as u64,
+            heuristic: heuristic_report,
+            capsule: capsule_report,
+        };
+        let buffers = FrameBuffers {
+            width: settings.width,
+            height: settings.height,
+            lighting,
+            shadow: traced.shadow,
+            reflection: traced.reflection,
+            refraction: traced.refraction,
+            final_srgb,
+        };
+        Frame { settings, gbuffer, buffers, rt_packed, report }
+    }
+
+    /// Stage 0 (paper 2): the capsule renders its packed frame (blocks D and P), the host
+    /// unpacks it (block U) into colour + depth for the merge.
+    fn capsule_stage(
+        &mut self,
+        camera: &Camera,
+        settings: FrameSettings,
+        clip_depth: Option<&[f32]>,
+    ) -> (Option<PackedRtFrame>, Option<RtLayer>, Option<CapsuleReport>) {
+        let Some(capsule) = self.capsule.as_mut() else { return (None, None, None) };
+        let mut packed = PackedRtFrame::new(settings.width, settings.height);
+        let request = CapsuleRequest { camera: *camera, width: settings.width, height: settings.height, clip_depth };
+        let stats = capsule.render(&request, &mut packed);
+        let unpack_start = Instant::now();
+        let layer = unpack(&packed);
+        let report = CapsuleReport {
+            points: stats.points,
+            build_ms: stats.build_ms,
+            trace_ms: stats.trace_ms,
+            pack_ms: stats.pack_ms,
+            unpack_ms: ms_since(unpack_start),
+            rays: stats.rays,
+        };
+        (Some(packed), Some(layer), Some(report))
+    }
+
+    /// Stage 1: the G-buffer (raster, or primary rays in rt-only mode) merged by depth with the
+    /// RT layer, then deferred lighting into the P-buffer. Returns the primary-ray count.
+    fn raster_stage(&self, camera: &Camera, settings: FrameSettings, rt_layer: Option<&RtLayer>) -> (GBuffer, Vec<Vec3>, u64) {
+        let (w, h) = (settings.width, settings.height);
+        let (gbuffer, primary) = if settings.mode == Mode::RtOnly {
+            let mut g = trace::rt_only_gbuffer(&self.prepared, &self.bvh, camera, w, h);
+            let primary = trace::primary_ray_count(w, h);
+            if let Some(layer) = rt_layer {
+                raster::merge_rt_layer(&mut g, layer, camera);
+            }
+            (g, primary)
+        } else {
+            (raster::rasterize(&self.prepared, camera, w, h, rt_layer), 0)
+        };
+        let lighting = lighting::deferred_lighting(&gbuffer, self.scene, camera);
+        (gbuffer, lighting, primary)
+    }
+
+    /// Stage 2: A per object from the object-id target (one pass), the heuristic's selection,
+    /// and the mask. `all` selects every visible object; `rt-only` traces every covered pixel;
+    /// `raster` traces nothing.
+    fn heuristic_stage(&mut self, gbuffer: &mut GBuffer, camera: &Camera, mode: Mode) -> Option<HeuristicReport> {
+        match mode {
+            Mode::Raster => None,
+            Mode::RtOnly => {
+                for (m, &id) in gbuffer.mask.iter_mut().zip(&gbuffer.object_id) {
+                    *m = if id != NO_OBJECT { 1.0 } else { 0.0 };
+                }
+                None
+            }
+            Mode::Hybrid | Mode::All => {
+                let areas = count_visible_pixels(&gbuffer.object_id, self.scene.objects.len());
+                let materials = &self.scene.materials;
+                let objects: Vec<ObjectInput> = self
+                    .scene
+                    .objects
+                    .iter()
+                    .zip(&areas)
+                    .zip(&self.prepared.object_bounds)
+                    .map(|((o, &area), b)| ObjectInput {
+                        name: o.name.clone(),
+                        area,
+                        bbox_center: if b.is_empty() { o.transform.position } else { b.center() },
+                        reflective: o.is_reflective(materials),
+                        refractive: o.is_refractive(materials),
+                        relevance: o.relevance,
+                        cost: o.cost,
+                    })
+                    .collect();
+                let frame = FrameInput {
+                    view_proj: camera.view_projection(gbuffer.width as f32 / gbuffer.height as f32),
+                    camera_position: camera.position,
+                    light_count: self.scene.lights.count(),
+                };
+                let selection = if mode == Mode::All {
+                    // Heuristic off: the same quantities, every visible object selected.
+                    let settings = self.heuristic.settings().clone();
+                    self.heuristic.set_settings(HeuristicSettings { budget: Budget::Unlimited, ..settings.clone() });
+                    let selection = self.heuristic.run(&objects, &frame);
+                    self.heuristic.set_settings(settings);
+                    selection
+                } else {
+                    self.heuristic.run(&objects, &frame)
+                };
+                write_mask(&gbuffer.object_id, &selection.selected, &mut gbuffer.mask);
+                Some(selection.report)
+            }
+        }
+    }
+
+    /// Stage 3: shadow, reflection and refraction rays for masked pixels (listings 8a–d).
+    fn trace_stage(&self, gbuffer: &GBuffer, camera: &Camera, mode: Mode) -> trace::TraceOutput {
+        if mode == Mode::Raster {
+            let n = gbuffer.len();
+            return trace::TraceOutput {
+                shadow: vec![Vec3::ONE; n],
+                reflection: vec![Vec3::ZERO; n],
+                refraction: vec![Vec3::ZERO; n],
+                rays: Default::default(),
+            };
+        }
+        trace::trace(&self.prepared, &self.bvh, gbuffer, camera)
+    }
+}
+
+fn timed<T>(slot: &mut f64, f: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let out = f();
+    *slot = ms_since(start);
+    out
+}
+
+fn ms_since(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}
