@@ -6,6 +6,10 @@
 //! Every error is a [`SceneError`] naming the scene file and the `line:column` of the offending
 //! value, and saying what is wrong.
 
+// `SceneError` carries the source text and span for miette reports; it is large, and only built on
+// the (cold) error path, so results keep it unboxed like the public `parse_scene` signature.
+#![allow(clippy::result_large_err)]
+
 use std::collections::HashMap;
 use std::fmt;
 use std::ops::Range;
@@ -642,7 +646,9 @@ impl Builder<'_> {
             match v {
                 Some(v) => *id = self.texture(v, ColorSpace::Srgb)?,
                 None => {
-                    return Err(self.err(s.span(), format!("cube-map `skybox` needs all six faces `px nx py ny pz nz`; `{key}` is missing")));
+                    return Err(
+                        self.err(s.span(), format!("cube-map `skybox` needs all six faces `px nx py ny pz nz`; `{key}` is missing"))
+                    );
                 }
             }
         }

@@ -220,7 +220,8 @@ mod tests {
     #[test]
     fn sphere_clamps_too_few_segments() {
         let m = sphere(0, 1);
-        assert_eq!(m.indices.len(), 2 * 3 * (2 - 1));
+        // Clamped to 3 slices × 2 stacks: 2·slices·(stacks − 1) = 6 triangles.
+        assert_eq!(m.indices.len(), 6);
         assert_closed(&m);
     }
 }
