@@ -15,20 +15,19 @@ use rand::{Rng, SeedableRng};
 const WIDTH: usize = 1280;
 const HEIGHT: usize = 720;
 
-/// An id image with `cols × rows` objects, each a rectangle inset in its grid cell (sky between),
-/// like a rasterised scene of many objects (runs of equal ids along each row).
+/// An id image with `cols × rows` objects, each a disc in its grid cell (sky between), like a
+/// rasterised scene of many objects: runs of equal ids along each row, of varying lengths, that
+/// do not line up with the 16-pixel chunks of the fast paths.
 fn id_image(cols: usize, rows: usize) -> Vec<u32> {
-    let (cell_w, cell_h) = (WIDTH / cols, HEIGHT / rows);
+    let (cell_w, cell_h) = (WIDTH as f32 / cols as f32, HEIGHT as f32 / rows as f32);
+    let radius = 0.48 * cell_w.min(cell_h);
     let mut ids = vec![SKY_ID; WIDTH * HEIGHT];
     for y in 0..HEIGHT {
         for x in 0..WIDTH {
-            let (cx, cy) = (x / cell_w, y / cell_h);
-            if cx >= cols || cy >= rows {
-                continue;
-            }
-            let (ix, iy) = (x % cell_w, y % cell_h);
-            let inset = (cell_w / 8, cell_h / 8);
-            if ix >= inset.0 && ix < cell_w - inset.0 && iy >= inset.1 && iy < cell_h - inset.1 {
+            let (fx, fy) = (x as f32 + 0.5, y as f32 + 0.5);
+            let (cx, cy) = ((fx / cell_w) as usize, (fy / cell_h) as usize);
+            let centre = ((cx as f32 + 0.5) * cell_w, (cy as f32 + 0.5) * cell_h);
+            if cx < cols && cy < rows && (fx - centre.0).hypot(fy - centre.1) <= radius {
                 ids[y * WIDTH + x] = (cy * cols + cx) as u32;
             }
         }

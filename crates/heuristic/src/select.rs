@@ -34,9 +34,20 @@ pub fn select(policy: Policy, nodes: &[Candidate], budget: f64) -> Vec<usize> {
     }
 }
 
-/// `Less` when node `a` is costlier than node `b` (sorts by cost descending).
-fn costlier(nodes: &[Candidate], a: usize, b: usize) -> Ordering {
-    nodes[b].cost().total_cmp(&nodes[a].cost()).then(a.cmp(&b))
+/// A u64 whose unsigned order is [`f64::total_cmp`]'s order of `x` (so that sorting plain
+/// integer pairs, which is fast, gives the same order as the comparators).
+fn total_order_key(x: f64) -> u64 {
+    let bits = x.to_bits();
+    if bits >> 63 == 1 { !bits } else { bits | (1 << 63) }
+}
+
+/// Node indices sorted by `key` descending, ties by index ascending.
+fn sorted_descending(n: usize, key: impl Fn(usize) -> f64) -> Vec<usize> {
+    // One u128 per node, key in the high half and index in the low half: a single integer
+    // comparison per step of the sort.
+    let mut keyed: Vec<u128> = (0..n).map(|i| (u128::from(!total_order_key(key(i))) << 64) | i as u128).collect();
+    keyed.sort_unstable();
+    keyed.into_iter().map(|k| k as u64 as usize).collect()
 }
 
 /// `Less` when node `a` is more relevant than node `b` (sorts by relevance descending).
@@ -67,12 +78,10 @@ pub fn select_paper(nodes: &[Candidate], budget: f64) -> Vec<usize> {
 
     // Second phase, the graph. `by_cost` is the cost chain: each node points to the next one,
     // which costs the same or less.
-    let mut by_cost: Vec<usize> = (0..n).collect();
-    by_cost.sort_unstable_by(|&a, &b| costlier(nodes, a, b));
+    let by_cost = sorted_descending(n, |i| nodes[i].cost());
     // Node i's relevance pointers, sorted by relevance descending, are the entries of
     // `by_relevance` before i that come after i in `by_cost`.
-    let mut by_relevance: Vec<usize> = (0..n).collect();
-    by_relevance.sort_unstable_by(|&a, &b| more_relevant(nodes, a, b));
+    let by_relevance = sorted_descending(n, |i| nodes[i].relevance);
 
     // Third phase.
     let mut removed = vec![false; n];
@@ -150,8 +159,7 @@ pub fn select_knapsack(nodes: &[Candidate], budget: f64) -> Vec<usize> {
         let cost = nodes[i].cost();
         if cost > 0.0 { nodes[i].relevance / cost } else { f64::INFINITY }
     };
-    let mut order: Vec<usize> = (0..nodes.len()).collect();
-    order.sort_unstable_by(|&a, &b| ratio(b).total_cmp(&ratio(a)).then(a.cmp(&b)));
+    let order = sorted_descending(nodes.len(), ratio);
     let mut cost_left = budget;
     let mut selected = Vec::new();
     for i in order {
@@ -179,6 +187,16 @@ mod tests {
     /// 5 being the most relevant of them.
     fn figure4() -> Vec<Candidate> {
         nodes(&[(1000.0, 8.0), (700.0, 4.0), (500.0, 9.0), (300.0, 3.0), (200.0, 1.0), (150.0, 7.0), (100.0, 5.0)])
+    }
+
+    #[test]
+    fn total_order_key_matches_total_cmp() {
+        let values = [f64::NEG_INFINITY, -1e300, -2.5, -0.0, 0.0, 1e-310, 3.0, 1e300, f64::INFINITY, f64::NAN, -f64::NAN];
+        for a in values {
+            for b in values {
+                assert_eq!(total_order_key(a).cmp(&total_order_key(b)), a.total_cmp(&b), "{a} vs {b}");
+            }
+        }
     }
 
     #[test]
