@@ -1,1 +1,216 @@
-fn main() {}
+//! Trace-stage benchmarks: BVH build time and traced rays per second by ray kind.
+//!
+//! Scenes: a synthetic room of ~270K triangles (tessellated spheres on a floor, closed walls),
+//! and Sponza (`/work/shared/assets/sponza-dabrovic/sponza_dabrovic.obj`) when the OBJ loader can
+//! read it. Rays: primary hits from `rt_only_gbuffer` at 640×360; shadow rays from each hit
+//! towards a point light (`any_hit_attenuation`); reflection rays (view direction reflected about
+//! the normal, `closest_hit`). Rays are traced in parallel as the trace stage does.
+//!
+//! `cargo bench -p hybrid-cpu --bench trace`; the throughput is printed by criterion as
+//! elements/s (= rays/s).
+
+use std::path::Path;
+use std::time::Duration;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use glam::{Vec2, Vec3};
+use hybrid_core::shading::reflect;
+use hybrid_cpu::PreparedScene;
+use hybrid_cpu::bvh::SceneBvh;
+use hybrid_cpu::trace::rt_only_gbuffer;
+use hybrid_scene::{Camera, Material, Mesh, Object, ObjectSource, Projection, Scene, Transform};
+use rayon::prelude::*;
+
+const SPONZA: &str = "/work/shared/assets/sponza-dabrovic/sponza_dabrovic.obj";
+const WIDTH: u32 = 640;
+const HEIGHT: u32 = 360;
+
+fn scene_of(meshes: Vec<Mesh>, materials: Vec<Material>, camera: Camera, textures: Vec<hybrid_scene::Texture>) -> Scene {
+    let object =
+        Object { name: "all".into(), source: ObjectSource::Plane, transform: Transform::default(), meshes, relevance: 1.0, cost: 1.0 };
+    Scene {
+        source: None,
+        camera,
+        environment: Default::default(),
+        heuristic: Default::default(),
+        trace: Default::default(),
+        materials,
+        textures,
+        objects: vec![object],
+        lights: Default::default(),
+        point_clouds: Vec::new(),
+        camera_path: None,
+    }
+}
+
+fn sphere(c: Vec3, r: f32, slices: u32, stacks: u32) -> Mesh {
+    let mut m = Mesh::default();
+    for j in 0..=stacks {
+        let th = std::f32::consts::PI * j as f32 / stacks as f32;
+        for i in 0..=slices {
+            let ph = std::f32::consts::TAU * i as f32 / slices as f32;
+            let n = Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin());
+            m.positions.push(c + n * r);
+            m.normals.push(n);
+            m.uvs.push(Vec2::new(i as f32 / slices as f32, j as f32 / stacks as f32));
+        }
+    }
+    let row = slices + 1;
+    for j in 0..stacks {
+        for i in 0..slices {
+            let (a, b) = (j * row + i, (j + 1) * row + i);
+            m.indices.push([a, b, a + 1]);
+            m.indices.push([a + 1, b, b + 1]);
+        }
+    }
+    m
+}
+
+/// A grid-subdivided quad (n×n cells) centred at `c` spanned by half-edges `u`, `v`.
+fn grid(c: Vec3, u: Vec3, v: Vec3, n: u32) -> Mesh {
+    let mut m = Mesh::default();
+    let nrm = u.cross(v).normalize();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (s, t) = (i as f32 / n as f32 * 2.0 - 1.0, j as f32 / n as f32 * 2.0 - 1.0);
+            m.positions.push(c + u * s + v * t);
+            m.normals.push(nrm);
+            m.uvs.push(Vec2::new(s, t));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            m.indices.push([a, a + 1, a + n + 2]);
+            m.indices.push([a, a + n + 2, a + n + 1]);
+        }
+    }
+    m
+}
+
+/// ~270K triangles: 16×16 spheres of 1,024 triangles in a closed 40×12×40 m room.
+fn synthetic() -> Scene {
+    let mut meshes = Vec::new();
+    for z in 0..16 {
+        for x in 0..16 {
+            let c = Vec3::new(-15.0 + x as f32 * 2.0, 0.8 + ((x * 7 + z * 3) % 5) as f32 * 0.5, -15.0 + z as f32 * 2.0);
+            meshes.push(sphere(c, 0.7, 32, 16));
+        }
+    }
+    let (h, y) = (20.0, 6.0);
+    meshes.push(grid(Vec3::ZERO, Vec3::X * h, -Vec3::Z * h, 40));
+    meshes.push(grid(Vec3::Y * 2.0 * y, Vec3::X * h, Vec3::Z * h, 40));
+    meshes.push(grid(Vec3::new(0.0, y, -h), Vec3::X * h, Vec3::Y * y, 20));
+    meshes.push(grid(Vec3::new(0.0, y, h), Vec3::Y * y, Vec3::X * h, 20));
+    meshes.push(grid(Vec3::new(-h, y, 0.0), Vec3::Y * y, Vec3::Z * h, 20));
+    meshes.push(grid(Vec3::new(h, y, 0.0), Vec3::Z * h, Vec3::Y * y, 20));
+    let camera = Camera {
+        position: Vec3::new(-18.0, 7.0, 18.0),
+        target: Vec3::new(0.0, 0.0, 0.0),
+        up: Vec3::Y,
+        projection: Projection::Perspective { fov_y_deg: 60.0, near: 0.05, far: 200.0 },
+    };
+    let materials = vec![Material::default()];
+    scene_of(meshes, materials, camera, Vec::new())
+}
+
+fn sponza() -> Option<Scene> {
+    let path = Path::new(SPONZA);
+    if !path.exists() {
+        return None;
+    }
+    let (mut materials, mut textures) = (Vec::new(), Vec::new());
+    let meshes = match hybrid_scene::load::load_model(path, &mut materials, &mut textures) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("skipping Sponza: {e}");
+            return None;
+        }
+    };
+    // The classic interior view along the atrium (Sponza's long axis is X).
+    let mut b = hybrid_scene::Aabb::EMPTY;
+    meshes.iter().flat_map(|m| &m.positions).for_each(|p| b.grow(*p));
+    let c = b.center();
+    let ext = b.max - b.min;
+    let camera = Camera {
+        position: Vec3::new(b.min.x + ext.x * 0.15, b.min.y + ext.y * 0.25, c.z),
+        target: Vec3::new(b.max.x, b.min.y + ext.y * 0.3, c.z),
+        up: Vec3::Y,
+        projection: Projection::Perspective { fov_y_deg: 60.0, near: 0.05, far: ext.length() * 2.0 },
+    };
+    Some(scene_of(meshes, materials, camera, textures))
+}
+
+/// Shadow rays (origin, unit dir, distance) towards a light and reflection rays from the hits.
+struct Rays {
+    shadow: Vec<(Vec3, Vec3, f32)>,
+    reflection: Vec<(Vec3, Vec3)>,
+}
+
+fn rays(prepared: &PreparedScene, bvh: &SceneBvh, light: Vec3) -> Rays {
+    let cam = &prepared.scene.camera;
+    let g = rt_only_gbuffer(prepared, bvh, cam, WIDTH, HEIGHT);
+    let bias = 1e-3;
+    let mut shadow = Vec::new();
+    let mut reflection = Vec::new();
+    for i in 0..g.len() {
+        if g.mask[i] == 0.0 {
+            continue;
+        }
+        let (p, n) = (g.position[i], g.normal[i]);
+        let i_dir = (p - cam.position).normalize();
+        let n = if n.dot(i_dir) > 0.0 { -n } else { n };
+        let o = p + n * bias;
+        let to = light - o;
+        shadow.push((o, to.normalize(), to.length()));
+        reflection.push((o, reflect(i_dir, n)));
+    }
+    Rays { shadow, reflection }
+}
+
+fn bench_scene(c: &mut Criterion, name: &str, scene: &Scene, light: Vec3) {
+    let prepared = PreparedScene::new(scene);
+    let mut group = c.benchmark_group(format!("trace/{name}"));
+    group.sample_size(10).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
+    group.throughput(Throughput::Elements(prepared.triangles.len() as u64));
+    group.bench_function(format!("bvh_build_{}k_tris", prepared.triangles.len() / 1000), |b| b.iter(|| SceneBvh::build(&prepared)));
+
+    let bvh = SceneBvh::build(&prepared);
+    let r = rays(&prepared, &bvh, light);
+    group.throughput(Throughput::Elements(r.shadow.len() as u64));
+    group.bench_function("shadow_rays", |b| {
+        b.iter(|| {
+            r.shadow
+                .par_chunks(256)
+                .with_max_len(1)
+                .map(|c| c.iter().map(|&(o, d, t)| bvh.any_hit_attenuation(&prepared, o, d, t)).sum::<f32>())
+                .sum::<f32>()
+        })
+    });
+    group.throughput(Throughput::Elements(r.reflection.len() as u64));
+    group.bench_function("reflection_rays", |b| {
+        b.iter(|| {
+            r.reflection
+                .par_chunks(256)
+                .with_max_len(1)
+                .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
+                .sum::<f32>()
+        })
+    });
+    group.bench_function("primary_rays_gbuffer", |b| b.iter(|| rt_only_gbuffer(&prepared, &bvh, &scene.camera, WIDTH, HEIGHT)));
+    group.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    let s = synthetic();
+    bench_scene(c, "synthetic", &s, Vec3::new(3.0, 10.0, 2.0));
+    if let Some(sp) = sponza() {
+        let mut b = hybrid_scene::Aabb::EMPTY;
+        sp.objects[0].meshes.iter().flat_map(|m| &m.positions).for_each(|p| b.grow(*p));
+        let light = Vec3::new(b.center().x, b.min.y + (b.max.y - b.min.y) * 0.8, b.center().z);
+        bench_scene(c, "sponza", &sp, light);
+    }
+}
+
+criterion_group!(trace_benches, benches);
+criterion_main!(trace_benches);

@@ -1,21 +1,22 @@
 //! `bvh`: the scene's triangle BVH for the trace stage (DESIGN §1, "PreparedScene … BVHs").
 //!
-//! Our own binary BVH rather than obvhs: a binned-SAH build (16 bins on all three axes, the
-//! upper levels split in parallel with `rayon::join`) and a traversal tuned for the two ray
-//! kinds of paper 1:
-//! - `closest_hit`: ordered (near child first) stack traversal, the far child pushed only when
-//!   its box entry is before the current closest hit;
+//! Our own BVH rather than obvhs: a binned-SAH binary build (16 bins on all three axes, the
+//! upper levels split in parallel with `rayon::join`), collapsed into a 4-wide BVH whose four
+//! child boxes are tested at once with 4-lane SIMD (glam `Vec4`), as Embree's BVH4 does.
+//! Traversal is tuned for the two ray kinds of paper 1:
+//! - `closest_hit`: ordered traversal (hit children sorted by entry distance, nearest first);
+//!   stacked entries farther than the closest hit so far are skipped;
 //! - `any_hit_attenuation` (listing 8b): unordered traversal that visits every triangle on the
-//!   segment once and stops as soon as the attenuation reaches 0 (an opaque blocker).
+//!   segment once and stops as soon as the attenuation reaches 0 (an opaque blocker);
+//!   triangles whose material casts no shadows are skipped before the triangle test.
 //!
-//! Leaves hold triangles in leaf order as precomputed Möller–Trumbore data (`v0`, `e1`, `e2`),
-//! so a leaf test touches one contiguous array. Nodes are 32 bytes; the two children of an inner
-//! node are adjacent, so both child boxes share one cache line.
+//! Leaves hold their triangles in packs of four as precomputed Möller–Trumbore data (`v0`, `e1`,
+//! `e2`, SoA), tested together with 4-lane SIMD; the SAH counts leaf cost in packs.
 //!
 //! The build is deterministic (same tree for any thread count): the parallel halves build into
-//! separate subtrees that are flattened in a fixed depth-first order.
+//! separate subtrees that are collapsed in a fixed depth-first order.
 
-use glam::{Vec3, Vec3A, Vec4};
+use glam::{IVec3, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
 use crate::prepare::{PreparedScene, TriangleRef};
@@ -30,35 +31,78 @@ pub struct Hit {
     pub bary: Vec3,
 }
 
-/// One node: bounds in `min.xyz`/`max.xyz`; `min.w` holds the bits of the first child index
-/// (inner) or the first leaf triangle (leaf), `max.w` the bits of the triangle count (0 = inner).
+/// A 4-wide node (SoA child boxes, tested together with 4-lane SIMD): `lo[axis]`/`hi[axis]`
+/// hold the four children's box minima/maxima on that axis. `child[k]` is an inner node index,
+/// `LEAF | leaf index`, or [`EMPTY_SLOT`] (its box is empty, so no ray enters it).
 #[derive(Debug, Clone, Copy)]
-struct Node {
-    min: Vec4,
-    max: Vec4,
+#[repr(C, align(64))]
+struct Node4 {
+    lo: [Vec4; 3],
+    hi: [Vec4; 3],
+    child: [u32; 4],
 }
 
-impl Node {
-    #[inline(always)]
-    fn first(&self) -> u32 {
-        self.min.w.to_bits()
-    }
-    #[inline(always)]
-    fn count(&self) -> u32 {
-        self.max.w.to_bits()
-    }
-    fn new(min: Vec3A, max: Vec3A, first: u32, count: u32) -> Self {
-        Self { min: min.extend(f32::from_bits(first)), max: max.extend(f32::from_bits(count)) }
+const LEAF: u32 = 1 << 31;
+const EMPTY_SLOT: u32 = u32::MAX;
+
+impl Node4 {
+    const EMPTY: Node4 = Node4 { lo: [Vec4::INFINITY; 3], hi: [Vec4::NEG_INFINITY; 3], child: [EMPTY_SLOT; 4] };
+    fn set(&mut self, k: usize, b: &Bounds, child: u32) {
+        for axis in 0..3 {
+            self.lo[axis][k] = b.min[axis];
+            self.hi[axis][k] = b.max[axis];
+        }
+        self.child[k] = child;
     }
 }
 
-/// Precomputed Möller–Trumbore triangle.
-#[derive(Debug, Clone, Copy)]
-struct Tri {
-    v0: Vec3A,
-    e1: Vec3A,
-    e2: Vec3A,
+/// A ray prepared for node tests: origin and inverse direction splatted per axis, and which
+/// box side is entered first on each axis.
+struct RayPre {
+    o: [Vec4; 3],
+    d: [Vec4; 3],
+    inv: [Vec4; 3],
+    neg: [bool; 3],
 }
+
+impl RayPre {
+    #[inline(always)]
+    fn new(o: Vec3A, d: Vec3A) -> Self {
+        let inv = d.recip();
+        Self {
+            o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            d: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
+            inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+            neg: [inv.x < 0.0, inv.y < 0.0, inv.z < 0.0],
+        }
+    }
+}
+
+/// Slab test of the four children: entry distances and the bit mask of children hit within
+/// `[t_min, t_max]`.
+#[inline(always)]
+fn node_hits(n: &Node4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, u32) {
+    let mut near = Vec4::splat(t_min);
+    let mut far = Vec4::splat(t_max);
+    for axis in 0..3 {
+        let (a, b) = if r.neg[axis] { (n.hi[axis], n.lo[axis]) } else { (n.lo[axis], n.hi[axis]) };
+        near = near.max((a - r.o[axis]) * r.inv[axis]);
+        far = far.min((b - r.o[axis]) * r.inv[axis]);
+    }
+    (near, near.cmple(far).bitmask())
+}
+
+/// Four precomputed Möller–Trumbore triangles in SoA form (`[axis]` lanes = triangles), tested
+/// together. Unused lanes are degenerate (all zero) and never hit.
+#[derive(Debug, Clone, Copy)]
+struct Tri4 {
+    v0: [Vec4; 3],
+    e1: [Vec4; 3],
+    e2: [Vec4; 3],
+}
+
+/// Leaf-order triangle index of an unused pack lane.
+const NO_TRI: u32 = u32::MAX;
 
 /// What a shadow ray does at a triangle (listing 8b), precomputed per triangle in leaf order.
 /// `IGNORE` (material casts no shadows) = transparency 1; constant opacity without maps =
@@ -68,8 +112,13 @@ const EVALUATE: f32 = -1.0;
 /// Triangle BVH over every triangle of a [`PreparedScene`].
 #[derive(Debug, Clone)]
 pub struct SceneBvh {
-    nodes: Vec<Node>,
-    tris: Vec<Tri>,
+    /// 4-wide nodes; the root is node 0 (when there are triangles).
+    nodes: Vec<Node4>,
+    /// `[first, count]` of each leaf's run of packs in `packs`.
+    leaves: Vec<[u32; 2]>,
+    packs: Vec<Tri4>,
+    /// Leaf-order triangle index of each pack lane (`pack · 4 + lane`), or [`NO_TRI`].
+    pack_tri: Vec<u32>,
     refs: Vec<TriangleRef>,
     /// Shadow-ray transparency per leaf-ordered triangle, or [`EVALUATE`].
     shadow_transparency: Vec<f32>,
@@ -80,12 +129,13 @@ const BINS: usize = 16;
 const MAX_LEAF: usize = 8;
 /// Nodes at this depth become leaves whatever their size, so traversal stacks stay bounded.
 const MAX_DEPTH: u32 = 56;
-const STACK: usize = 64;
+/// Each 4-wide level pushes at most 3 entries.
+const STACK: usize = 3 * MAX_DEPTH as usize + 8;
 /// Subtrees larger than this are split in parallel.
 const PARALLEL_MIN: usize = 8192;
-/// SAH: cost of a box test relative to a triangle test.
+/// SAH: cost of a 4-wide node test relative to a 4-triangle test.
 const TRAVERSAL_COST: f32 = 1.0;
-const INTERSECT_COST: f32 = 1.0;
+const INTERSECT_COST: f32 = 0.6;
 
 #[derive(Clone, Copy)]
 struct Bounds {
@@ -117,44 +167,92 @@ enum BuildNode {
     Inner { bounds: Bounds, children: Box<(BuildNode, BuildNode)> },
 }
 
-struct BuildInput {
-    boxes: Vec<Bounds>,
-    centroids: Vec<Vec3A>,
+/// A primitive during the build: its box, with its triangle index in the bits of `lo.w`. The
+/// build partitions these records themselves (not indices into them), so every pass over a
+/// node's primitives reads memory in order.
+#[derive(Clone, Copy)]
+struct Prim {
+    lo: Vec4,
+    hi: Vec4,
+}
+
+impl Prim {
+    #[inline(always)]
+    fn bounds(&self) -> Bounds {
+        Bounds { min: Vec3A::from_vec4(self.lo), max: Vec3A::from_vec4(self.hi) }
+    }
+    /// Twice the box centre (the factor 2 does not change any split).
+    #[inline(always)]
+    fn centroid2(&self) -> Vec3A {
+        Vec3A::from_vec4(self.lo) + Vec3A::from_vec4(self.hi)
+    }
+    #[inline(always)]
+    fn index(&self) -> u32 {
+        self.lo.w.to_bits()
+    }
 }
 
 impl SceneBvh {
     /// Builds the BVH over `prepared.triangles`.
     pub fn build(prepared: &PreparedScene) -> SceneBvh {
         let corners: Vec<[Vec3; 3]> = prepared.triangles.par_iter().map(|t| prepared.triangle(*t)).collect();
-        let boxes: Vec<Bounds> = corners
+        let mut prims: Vec<Prim> = corners
             .par_iter()
-            .map(|c| {
+            .enumerate()
+            .map(|(i, c)| {
                 let [a, b, d] = c.map(Vec3A::from);
-                // Non-finite corners make an empty box: such triangles can never be hit anyway.
+                let idx = f32::from_bits(i as u32);
+                // Non-finite corners make a point box: such triangles can never be hit anyway.
                 if !(a.is_finite() && b.is_finite() && d.is_finite()) {
-                    return Bounds { min: Vec3A::ZERO, max: Vec3A::ZERO };
+                    return Prim { lo: Vec4::ZERO.with_w(idx), hi: Vec4::ZERO };
                 }
-                Bounds { min: a.min(b).min(d), max: a.max(b).max(d) }
+                Prim { lo: a.min(b).min(d).extend(idx), hi: a.max(b).max(d).extend(0.0) }
             })
             .collect();
-        let centroids = boxes.par_iter().map(|b| (b.min + b.max) * 0.5).collect();
-        let input = BuildInput { boxes, centroids };
-        let mut order: Vec<u32> = (0..prepared.triangles.len() as u32).collect();
 
-        let mut nodes = Vec::with_capacity(order.len());
-        if !order.is_empty() {
-            let root = build_rec(&input, &mut order, 0, 0);
-            nodes.push(Node::new(Vec3A::ZERO, Vec3A::ZERO, 0, 0));
-            flatten(&root, 0, &mut nodes);
+        let mut nodes = Vec::with_capacity(prims.len() / 4);
+        let mut leaves = Vec::with_capacity(prims.len() / 2);
+        if !prims.is_empty() {
+            let root = build_rec(&mut prims, 0, 0);
+            if let BuildNode::Leaf { bounds, .. } = &root {
+                // A single leaf: a root node with one child.
+                nodes.push(Node4::EMPTY);
+                let r = collapse(&root, &mut nodes, &mut leaves);
+                nodes[0].set(0, bounds, r);
+            } else {
+                collapse(&root, &mut nodes, &mut leaves);
+            }
         }
 
-        let tris = order
-            .par_iter()
-            .map(|&i| {
-                let [a, b, c] = corners[i as usize].map(Vec3A::from);
-                Tri { v0: a, e1: b - a, e2: c - a }
-            })
-            .collect();
+        let order: Vec<u32> = prims.iter().map(Prim::index).collect();
+        drop(prims);
+        // Pack each leaf's triangles by four, in leaf (depth-first) order.
+        let mut packs = Vec::with_capacity(order.len() / 2);
+        let mut pack_tri = Vec::with_capacity(order.len() * 2);
+        for leaf in leaves.iter_mut() {
+            let [first, count] = *leaf;
+            let start = packs.len() as u32;
+            for chunk in (first..first + count).step_by(4) {
+                let mut p = Tri4 { v0: [Vec4::ZERO; 3], e1: [Vec4::ZERO; 3], e2: [Vec4::ZERO; 3] };
+                for lane in 0..4 {
+                    let k = chunk + lane as u32;
+                    if k >= first + count {
+                        pack_tri.push(NO_TRI);
+                        continue;
+                    }
+                    let [a, b, c] = corners[order[k as usize] as usize];
+                    let (e1, e2) = (b - a, c - a);
+                    for axis in 0..3 {
+                        p.v0[axis][lane] = a[axis];
+                        p.e1[axis][lane] = e1[axis];
+                        p.e2[axis][lane] = e2[axis];
+                    }
+                    pack_tri.push(k);
+                }
+                packs.push(p);
+            }
+            *leaf = [start, packs.len() as u32 - start];
+        }
         let refs: Vec<TriangleRef> = order.iter().map(|&i| prepared.triangles[i as usize]).collect();
         let shadow_transparency = refs
             .iter()
@@ -169,68 +267,87 @@ impl SceneBvh {
                 }
             })
             .collect();
-        SceneBvh { nodes, tris, refs, shadow_transparency }
+        SceneBvh { nodes, leaves, packs, pack_tri, refs, shadow_transparency }
     }
 
     /// Number of triangles in the BVH.
     pub fn triangle_count(&self) -> usize {
-        self.tris.len()
+        self.refs.len()
     }
 
-    /// Number of nodes (inner and leaf).
+    /// Number of (4-wide) inner nodes.
     pub fn node_count(&self) -> usize {
         self.nodes.len()
     }
 
+    /// Number of leaves.
+    pub fn leaf_count(&self) -> usize {
+        self.leaves.len()
+    }
+
     /// The closest triangle hit with `t_min < t < t_max` along `origin + t·dir`.
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
-        let o = Vec3A::from(origin);
-        let d = Vec3A::from(dir);
-        let inv = d.recip();
-        if self.tris.is_empty() {
+        if self.refs.is_empty() {
             return None;
         }
+        let o = Vec3A::from(origin);
+        let d = Vec3A::from(dir);
+        let r = RayPre::new(o, d);
         let mut best_t = t_max;
         let mut best = u32::MAX;
         let mut best_uv = (0.0f32, 0.0f32);
-        let mut stack = [0u32; STACK];
+        let mut stack = [(0u32, 0.0f32); STACK];
         let mut sp = 0usize;
-        let mut node = &self.nodes[0];
-        if box_entry(node, o, inv, t_min, best_t) == f32::INFINITY {
-            return None;
-        }
+        let mut cur = 0u32;
         loop {
-            let count = node.count();
-            if count == 0 {
-                let c = node.first() as usize;
-                let (a, b) = (&self.nodes[c], &self.nodes[c + 1]);
-                let ta = box_entry(a, o, inv, t_min, best_t);
-                let tb = box_entry(b, o, inv, t_min, best_t);
-                if ta != f32::INFINITY {
-                    if tb != f32::INFINITY {
-                        let (near, far) = if ta <= tb { (c, c + 1) } else { (c + 1, c) };
-                        stack[sp] = far as u32;
-                        sp += 1;
-                        node = &self.nodes[near];
-                    } else {
-                        node = a;
+            if cur & LEAF == 0 {
+                let n = &self.nodes[cur as usize];
+                let (near, mask) = node_hits(n, &r, t_min, best_t);
+                if mask != 0 {
+                    if mask & (mask - 1) == 0 {
+                        cur = n.child[mask.trailing_zeros() as usize];
+                        continue;
                     }
-                    continue;
-                } else if tb != f32::INFINITY {
-                    node = b;
+                    // Several children: sort them by entry distance; visit the nearest, stack
+                    // the rest farthest first.
+                    let mut hits = [(0u32, 0.0f32); 4];
+                    let mut k = 0;
+                    let mut m = mask;
+                    while m != 0 {
+                        let c = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let e = (n.child[c], near[c]);
+                        let mut j = k;
+                        while j > 0 && hits[j - 1].1 > e.1 {
+                            hits[j] = hits[j - 1];
+                            j -= 1;
+                        }
+                        hits[j] = e;
+                        k += 1;
+                    }
+                    for h in hits[1..k].iter().rev() {
+                        stack[sp] = *h;
+                        sp += 1;
+                    }
+                    cur = hits[0].0;
                     continue;
                 }
             } else {
-                let first = node.first() as usize;
-                for i in first..first + count as usize {
-                    if let Some((t, u, v)) = intersect(&self.tris[i], o, d, t_min, best_t) {
-                        best_t = t;
-                        best = i as u32;
-                        best_uv = (u, v);
+                let [first, count] = self.leaves[(cur & !LEAF) as usize];
+                for pi in first as usize..(first + count) as usize {
+                    let (t, u, v, mut mask) = intersect4(&self.packs[pi], &r, t_min, best_t);
+                    while mask != 0 {
+                        let lane = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        if t[lane] < best_t {
+                            best_t = t[lane];
+                            best = self.pack_tri[pi * 4 + lane];
+                            best_uv = (u[lane], v[lane]);
+                        }
                     }
                 }
             }
-            // Pop the next node whose box is still before the closest hit.
+            // Pop the next entry that starts before the closest hit so far.
             loop {
                 if sp == 0 {
                     return (best != u32::MAX).then(|| Hit {
@@ -240,9 +357,9 @@ impl SceneBvh {
                     });
                 }
                 sp -= 1;
-                let n = &self.nodes[stack[sp] as usize];
-                if box_entry(n, o, inv, t_min, best_t) != f32::INFINITY {
-                    node = n;
+                let (c, entry) = stack[sp];
+                if entry <= best_t {
+                    cur = c;
                     break;
                 }
             }
@@ -284,46 +401,40 @@ impl SceneBvh {
     /// order, until `f` returns false. Cheap triangles (transparency 1) are skipped up front.
     #[inline]
     fn for_each_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, mut f: impl FnMut(usize, f32, f32) -> bool) {
+        if self.refs.is_empty() {
+            return;
+        }
         let o = Vec3A::from(origin);
         let d = Vec3A::from(dir);
-        let inv = d.recip();
-        if self.tris.is_empty() {
-            return;
-        }
+        let r = RayPre::new(o, d);
         let mut stack = [0u32; STACK];
         let mut sp = 0usize;
-        let mut node = &self.nodes[0];
-        if box_entry(node, o, inv, t_min, t_max) == f32::INFINITY {
-            return;
-        }
+        let mut cur = 0u32;
         loop {
-            let count = node.count();
-            if count == 0 {
-                let c = node.first() as usize;
-                let (a, b) = (&self.nodes[c], &self.nodes[c + 1]);
-                let ha = box_entry(a, o, inv, t_min, t_max) != f32::INFINITY;
-                let hb = box_entry(b, o, inv, t_min, t_max) != f32::INFINITY;
-                if ha {
-                    if hb {
-                        stack[sp] = c as u32 + 1;
+            if cur & LEAF == 0 {
+                let n = &self.nodes[cur as usize];
+                let (_, mut mask) = node_hits(n, &r, t_min, t_max);
+                if mask != 0 {
+                    cur = n.child[mask.trailing_zeros() as usize];
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        stack[sp] = n.child[mask.trailing_zeros() as usize];
                         sp += 1;
+                        mask &= mask - 1;
                     }
-                    node = a;
-                    continue;
-                } else if hb {
-                    node = b;
                     continue;
                 }
             } else {
-                let first = node.first() as usize;
-                for i in first..first + count as usize {
-                    if self.shadow_transparency[i] == 1.0 {
-                        continue;
-                    }
-                    if let Some((_, u, v)) = intersect(&self.tris[i], o, d, t_min, t_max)
-                        && !f(i, u, v)
-                    {
-                        return;
+                let [first, count] = self.leaves[(cur & !LEAF) as usize];
+                for pi in first as usize..(first + count) as usize {
+                    let (_, u, v, mut mask) = intersect4(&self.packs[pi], &r, t_min, t_max);
+                    while mask != 0 {
+                        let lane = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let i = self.pack_tri[pi * 4 + lane] as usize;
+                        if self.shadow_transparency[i] != 1.0 && !f(i, u[lane], v[lane]) {
+                            return;
+                        }
                     }
                 }
             }
@@ -331,63 +442,60 @@ impl SceneBvh {
                 return;
             }
             sp -= 1;
-            node = &self.nodes[stack[sp] as usize];
+            cur = stack[sp];
         }
     }
 }
 
-/// Slab test: the entry distance into the node's box within `[t_min, t_max]`, or ∞ on a miss.
+/// Möller–Trumbore on four triangles: `(t, u, v, mask of lanes hit with t_min < t < t_max)`;
+/// `u`/`v` are the weights of corners 1/2.
 #[inline(always)]
-fn box_entry(n: &Node, o: Vec3A, inv: Vec3A, t_min: f32, t_max: f32) -> f32 {
-    let t1 = (Vec3A::from_vec4(n.min) - o) * inv;
-    let t2 = (Vec3A::from_vec4(n.max) - o) * inv;
-    let near = t1.min(t2).max_element().max(t_min);
-    let far = t1.max(t2).min_element().min(t_max);
-    if near <= far { near } else { f32::INFINITY }
+fn intersect4(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, Vec4, Vec4, u32) {
+    let [dx, dy, dz] = r.d;
+    let [e1x, e1y, e1z] = p.e1;
+    let [e2x, e2y, e2z] = p.e2;
+    // p = d × e2
+    let px = dy * e2z - dz * e2y;
+    let py = dz * e2x - dx * e2z;
+    let pz = dx * e2y - dy * e2x;
+    let det = e1x * px + e1y * py + e1z * pz;
+    let inv_det = det.recip();
+    let sx = r.o[0] - p.v0[0];
+    let sy = r.o[1] - p.v0[1];
+    let sz = r.o[2] - p.v0[2];
+    let u = (sx * px + sy * py + sz * pz) * inv_det;
+    // q = s × e1
+    let qx = sy * e1z - sz * e1y;
+    let qy = sz * e1x - sx * e1z;
+    let qz = sx * e1y - sy * e1x;
+    let v = (dx * qx + dy * qy + dz * qz) * inv_det;
+    let t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
+    // NaN lanes (degenerate or unused triangles) fail every comparison.
+    let hit =
+        u.cmpge(Vec4::ZERO) & v.cmpge(Vec4::ZERO) & (u + v).cmple(Vec4::ONE) & t.cmpgt(Vec4::splat(t_min)) & t.cmplt(Vec4::splat(t_max));
+    (t, u, v, hit.bitmask())
 }
 
-/// Möller–Trumbore: `(t, u, v)` with `t_min < t < t_max`, `u`/`v` the weights of corners 1/2.
-#[inline(always)]
-fn intersect(tri: &Tri, o: Vec3A, d: Vec3A, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
-    let p = d.cross(tri.e2);
-    let det = tri.e1.dot(p);
-    if det == 0.0 || !det.is_finite() {
-        return None;
-    }
-    let inv_det = 1.0 / det;
-    let s = o - tri.v0;
-    let u = s.dot(p) * inv_det;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
-    }
-    let q = s.cross(tri.e1);
-    let v = d.dot(q) * inv_det;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    let t = tri.e2.dot(q) * inv_det;
-    (t > t_min && t < t_max).then_some((t, u, v))
-}
-
-fn build_rec(input: &BuildInput, prims: &mut [u32], offset: u32, depth: u32) -> BuildNode {
+fn build_rec(prims: &mut [Prim], offset: u32, depth: u32) -> BuildNode {
     let mut bounds = Bounds::EMPTY;
     let mut cb = Bounds::EMPTY;
-    for &p in prims.iter() {
-        bounds.grow(&input.boxes[p as usize]);
-        cb.grow_point(input.centroids[p as usize]);
+    for p in prims.iter() {
+        bounds.grow(&p.bounds());
+        cb.grow_point(p.centroid2());
     }
     let n = prims.len();
     let leaf = BuildNode::Leaf { bounds, first: offset, count: n as u32 };
-    if n <= 1 || depth >= MAX_DEPTH {
+    // A split costs at least one node test more than a leaf of one pack.
+    if n <= 1 || depth >= MAX_DEPTH || (n <= MAX_LEAF && packs_of(n) * INTERSECT_COST <= TRAVERSAL_COST) {
         return leaf;
     }
-    let extent = cb.max - cb.min;
-    let split = best_split(input, prims, &cb, &bounds);
+    let nb = n.clamp(4, BINS);
+    let split = best_split(prims, &cb, &bounds, nb);
     let mid = match split {
-        Some((axis, bin, cost)) if cost < n as f32 * INTERSECT_COST || n > MAX_LEAF => {
-            let scale = BINS as f32 / extent[axis];
+        Some((axis, bin, cost)) if cost < packs_of(n) * INTERSECT_COST || n > MAX_LEAF => {
+            let scale = nb as f32 / (cb.max - cb.min)[axis];
             let lo = cb.min[axis];
-            partition(prims, |p| bin_of(input.centroids[p as usize][axis], lo, scale) <= bin)
+            partition(prims, |p| bin_of(p.centroid2()[axis], lo, scale, nb) <= bin)
         }
         Some(_) => return leaf,
         None if n > MAX_LEAF => n / 2, // all centroids equal: any split is as good
@@ -398,54 +506,68 @@ fn build_rec(input: &BuildInput, prims: &mut [u32], offset: u32, depth: u32) -> 
     }
     let (l, r) = prims.split_at_mut(mid);
     let (a, b) = if n >= PARALLEL_MIN {
-        rayon::join(|| build_rec(input, l, offset, depth + 1), || build_rec(input, r, offset + mid as u32, depth + 1))
+        rayon::join(|| build_rec(l, offset, depth + 1), || build_rec(r, offset + mid as u32, depth + 1))
     } else {
-        (build_rec(input, l, offset, depth + 1), build_rec(input, r, offset + mid as u32, depth + 1))
+        (build_rec(l, offset, depth + 1), build_rec(r, offset + mid as u32, depth + 1))
     };
     BuildNode::Inner { bounds, children: Box::new((a, b)) }
 }
 
+/// Leaf cost unit: triangles are tested four at a time.
 #[inline]
-fn bin_of(c: f32, lo: f32, scale: f32) -> usize {
-    (((c - lo) * scale) as usize).min(BINS - 1)
+fn packs_of(n: usize) -> f32 {
+    n.div_ceil(4) as f32
 }
 
-/// Binned SAH over all three axes: `(axis, last bin of the left side, cost)`.
-fn best_split(input: &BuildInput, prims: &[u32], cb: &Bounds, bounds: &Bounds) -> Option<(usize, usize, f32)> {
+#[inline]
+fn bin_of(c: f32, lo: f32, scale: f32, nb: usize) -> usize {
+    (((c - lo) * scale) as usize).min(nb - 1)
+}
+
+/// Binned SAH with `nb ≤ BINS` bins over all three axes at once (one pass over the primitives):
+/// `(axis, last bin of the left side, cost)`.
+fn best_split(prims: &[Prim], cb: &Bounds, bounds: &Bounds, nb: usize) -> Option<(usize, usize, f32)> {
     let extent = cb.max - cb.min;
+    let usable = [0, 1, 2].map(|a| extent[a] > 0.0 && extent[a].is_finite());
+    if !usable.iter().any(|&u| u) {
+        return None;
+    }
+    let scale = Vec3A::from_array([0, 1, 2].map(|a| if usable[a] { nb as f32 / extent[a] } else { 0.0 }));
+    let mut bins = [[Bounds::EMPTY; BINS]; 3];
+    let mut counts = [[0u32; BINS]; 3];
+    for p in prims {
+        // Saturating float → int casts: NaN and negatives land in bin 0.
+        let b =
+            ((p.centroid2() - cb.min) * scale).as_ivec3().clamp(IVec3::ZERO, IVec3::splat(nb as i32 - 1)).to_array().map(|x| x as usize);
+        let pb = p.bounds();
+        for axis in 0..3 {
+            bins[axis][b[axis]].grow(&pb);
+            counts[axis][b[axis]] += 1;
+        }
+    }
     let mut best: Option<(usize, usize, f32)> = None;
     let inv_area = 1.0 / bounds.half_area().max(f32::MIN_POSITIVE);
-    for axis in 0..3 {
-        if extent[axis] <= 0.0 || !extent[axis].is_finite() {
-            continue;
-        }
-        let scale = BINS as f32 / extent[axis];
-        let lo = cb.min[axis];
-        let mut bins = [Bounds::EMPTY; BINS];
-        let mut counts = [0u32; BINS];
-        for &p in prims {
-            let b = bin_of(input.centroids[p as usize][axis], lo, scale);
-            bins[b].grow(&input.boxes[p as usize]);
-            counts[b] += 1;
-        }
+    let total = prims.len() as u32;
+    for axis in (0..3).filter(|&a| usable[a]) {
+        let (bins, counts) = (&bins[axis], &counts[axis]);
         // Sweep from the right, then from the left.
         let mut right_area = [0.0f32; BINS];
         let mut acc = Bounds::EMPTY;
-        for i in (1..BINS).rev() {
+        for i in (1..nb).rev() {
             acc.grow(&bins[i]);
             right_area[i] = acc.half_area();
         }
         let mut left = Bounds::EMPTY;
         let mut nl = 0u32;
-        let total: u32 = counts.iter().sum();
-        for i in 0..BINS - 1 {
+        for i in 0..nb - 1 {
             left.grow(&bins[i]);
             nl += counts[i];
             let nr = total - nl;
             if nl == 0 || nr == 0 {
                 continue;
             }
-            let cost = TRAVERSAL_COST + INTERSECT_COST * (left.half_area() * nl as f32 + right_area[i + 1] * nr as f32) * inv_area;
+            let cost = TRAVERSAL_COST
+                + INTERSECT_COST * (left.half_area() * packs_of(nl as usize) + right_area[i + 1] * packs_of(nr as usize)) * inv_area;
             if best.is_none_or(|b| cost < b.2) {
                 best = Some((axis, i, cost));
             }
@@ -455,11 +577,11 @@ fn best_split(input: &BuildInput, prims: &[u32], cb: &Bounds, bounds: &Bounds) -
 }
 
 /// In-place partition: elements with `pred` true first; returns how many.
-fn partition(v: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
+fn partition(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> usize {
     let mut i = 0;
     let mut j = v.len();
     while i < j {
-        if pred(v[i]) {
+        if pred(&v[i]) {
             i += 1;
         } else {
             j -= 1;
@@ -469,16 +591,44 @@ fn partition(v: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
     i
 }
 
-fn flatten(n: &BuildNode, idx: usize, nodes: &mut Vec<Node>) {
+fn bounds_of(n: &BuildNode) -> &Bounds {
     match n {
-        BuildNode::Leaf { bounds, first, count } => nodes[idx] = Node::new(bounds.min, bounds.max, *first, *count),
-        BuildNode::Inner { bounds, children } => {
-            let c = nodes.len();
-            nodes.push(Node::new(Vec3A::ZERO, Vec3A::ZERO, 0, 0));
-            nodes.push(Node::new(Vec3A::ZERO, Vec3A::ZERO, 0, 0));
-            nodes[idx] = Node::new(bounds.min, bounds.max, c as u32, 0);
-            flatten(&children.0, c, nodes);
-            flatten(&children.1, c + 1, nodes);
+        BuildNode::Leaf { bounds, .. } | BuildNode::Inner { bounds, .. } => bounds,
+    }
+}
+
+/// Collapses the binary build tree into 4-wide nodes (each node takes up to four descendants,
+/// opening the largest-area inner child first); returns the reference to `n`.
+fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, leaves: &mut Vec<[u32; 2]>) -> u32 {
+    match n {
+        BuildNode::Leaf { first, count, .. } => {
+            leaves.push([*first, *count]);
+            LEAF | (leaves.len() - 1) as u32
+        }
+        BuildNode::Inner { children, .. } => {
+            let mut kids: Vec<&BuildNode> = vec![&children.0, &children.1];
+            while kids.len() < 4 {
+                let open = kids
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, k)| matches!(k, BuildNode::Inner { .. }))
+                    .max_by(|a, b| bounds_of(a.1).half_area().total_cmp(&bounds_of(b.1).half_area()))
+                    .map(|(i, _)| i);
+                let Some(i) = open else { break };
+                if let BuildNode::Inner { children, .. } = kids[i] {
+                    kids[i] = &children.0;
+                    kids.insert(i + 1, &children.1);
+                }
+            }
+            let idx = nodes.len();
+            nodes.push(Node4::EMPTY);
+            let mut node = Node4::EMPTY;
+            for (k, kid) in kids.iter().enumerate() {
+                let r = collapse(kid, nodes, leaves);
+                node.set(k, bounds_of(kid), r);
+            }
+            nodes[idx] = node;
+            idx as u32
         }
     }
 }
@@ -617,14 +767,18 @@ mod tests {
         let b = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| SceneBvh::build(&p));
         assert_eq!(a.refs, b.refs);
         assert_eq!(a.nodes.len(), b.nodes.len());
-        assert!(a.nodes.iter().zip(&b.nodes).all(|(x, y)| x.min.to_array().map(f32::to_bits) == y.min.to_array().map(f32::to_bits)
-            && x.max.to_array().map(f32::to_bits) == y.max.to_array().map(f32::to_bits)));
+        assert_eq!(a.leaves, b.leaves);
+        let bits = |n: &Node4| (n.lo.map(|v| v.to_array().map(f32::to_bits)), n.hi.map(|v| v.to_array().map(f32::to_bits)), n.child);
+        assert!(a.nodes.iter().zip(&b.nodes).all(|(x, y)| bits(x) == bits(y)));
         // Every triangle is in exactly one leaf.
-        let mut seen = vec![false; a.tris.len()];
-        for n in a.nodes.iter().filter(|n| n.count() > 0) {
-            for i in n.first()..n.first() + n.count() {
-                assert!(!seen[i as usize]);
-                seen[i as usize] = true;
+        let mut seen = vec![false; a.refs.len()];
+        for &[first, count] in &a.leaves {
+            for k in first * 4..(first + count) * 4 {
+                let i = a.pack_tri[k as usize];
+                if i != NO_TRI {
+                    assert!(!seen[i as usize]);
+                    seen[i as usize] = true;
+                }
             }
         }
         assert!(seen.iter().all(|&s| s));
