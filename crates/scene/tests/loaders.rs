@@ -27,6 +27,7 @@ impl Model {
     }
 }
 
+#[allow(clippy::result_large_err)] // SceneError is the API's error type
 fn model(rel: &str) -> Result<Model, SceneError> {
     let (mut materials, mut textures) = (Vec::new(), Vec::new());
     let meshes = load_model(&asset(rel), &mut materials, &mut textures)?;

@@ -192,13 +192,13 @@ impl Ctx<'_> {
         let n = mesh.positions.len();
         let len_err = |attr: &str, got: usize| self.err(format!("{what}: {attr} has {got} entries but POSITION has {n}"));
         if let Some(it) = reader.read_normals() {
-            mesh.normals = it.map(|v| Vec3::from(v)).collect();
+            mesh.normals = it.map(Vec3::from).collect();
             if mesh.normals.len() != n {
                 return Err(len_err("NORMAL", mesh.normals.len()));
             }
         }
         if let Some(it) = reader.read_tex_coords(0) {
-            mesh.uvs = it.into_f32().map(|v| Vec2::from(v)).map(|v| if v.is_finite() { v } else { Vec2::ZERO }).collect();
+            mesh.uvs = it.into_f32().map(Vec2::from).map(|v| if v.is_finite() { v } else { Vec2::ZERO }).collect();
             if mesh.uvs.len() != n {
                 return Err(len_err("TEXCOORD_0", mesh.uvs.len()));
             }

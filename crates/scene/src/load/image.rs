@@ -71,7 +71,7 @@ mod tests {
         img.save(&p).unwrap();
         let t = load(&p, ColorSpace::Srgb).unwrap();
         assert_eq!((t.width(), t.height()), (4, 2));
-        assert_eq!(t.levels[0].texels[1 * 4 + 3], [180, 100, 7, 255]);
+        assert_eq!(t.levels[0].texels[4 + 3], [180, 100, 7, 255]);
         assert_eq!(t.name, "t.png");
 
         let bad = dir.path().join("bad.png");
