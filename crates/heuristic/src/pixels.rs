@@ -112,21 +112,27 @@ mod tests {
         assert_eq!(count_visible_pixels(&[1, 1, 1], 2), vec![0, 3]);
     }
 
-    #[test]
-    fn counts_match_naive_histogram() {
-        // Deterministic pseudo-random ids with runs of varying length.
+    /// Deterministic pseudo-random ids (objects 0..23, sky, RT-scene) in runs of 0 to 60 pixels,
+    /// so that both the per-pixel and the 16-pixel fast paths are taken.
+    fn runs_of_ids() -> Vec<u32> {
         let mut state = 12345u32;
         let mut ids = Vec::new();
-        for _ in 0..2000 {
+        for _ in 0..3000 {
             state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             let id = match state >> 29 {
                 0 => SKY_ID,
                 1 => RT_SCENE_ID,
                 _ => (state >> 8) % 23,
             };
-            let run = (state >> 4) % 9;
+            let run = (state >> 4) % 61;
             ids.extend(std::iter::repeat_n(id, run as usize));
         }
+        ids
+    }
+
+    #[test]
+    fn counts_match_naive_histogram() {
+        let ids = runs_of_ids();
         let mut naive = vec![0u64; 20];
         for &id in &ids {
             if (id as usize) < naive.len() {
@@ -134,6 +140,28 @@ mod tests {
             }
         }
         assert_eq!(count_visible_pixels(&ids, 20), naive);
+        // Every offset of the chunk grid.
+        for skip in 1..16 {
+            let mut naive = vec![0u64; 20];
+            for &id in &ids[skip..] {
+                if (id as usize) < naive.len() {
+                    naive[id as usize] += 1;
+                }
+            }
+            assert_eq!(count_visible_pixels(&ids[skip..], 20), naive);
+        }
+    }
+
+    #[test]
+    fn mask_matches_naive_on_long_runs() {
+        let ids = runs_of_ids();
+        let selected: Vec<bool> = (0..20).map(|i| i % 3 != 0).collect();
+        let mut mask = vec![0.5f32; ids.len()];
+        write_mask(&ids, &selected, &mut mask);
+        for (&id, &m) in ids.iter().zip(&mask) {
+            let on = (id as usize) < selected.len() && selected[id as usize];
+            assert_eq!(m, if on { 1.0 } else { 0.0 }, "id {id}");
+        }
     }
 
     #[test]
