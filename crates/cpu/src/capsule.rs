@@ -26,7 +26,7 @@ use hybrid_scene::texture::srgb_to_linear;
 use hybrid_scene::{Camera, Environment, Lights, PointCloud, PointColoring};
 use rayon::prelude::*;
 
-use crate::spheres::{SphereBvh, SphereBvhError};
+use crate::spheres::{SphereBvh, SphereBvhError, TraversalStack};
 
 pub use hybrid_core::depth_merge::CapsuleStats;
 
@@ -190,7 +190,11 @@ pub struct PrimaryRay {
 /// projects back onto its pixel centre with the raster's view-projection.
 #[derive(Debug, Clone, Copy)]
 pub struct RayGen {
+    /// View → world rotation (the transpose of the view matrix's rotation).
     view_inv: Mat4,
+    /// The camera position, exactly (not through the inverse matrix, whose rounding is ~1e-7 of the
+    /// camera's distance from the origin: too much for a 1 cm near plane).
+    eye: Vec3,
     sx: f32,
     sy: f32,
     width: f32,
@@ -205,8 +209,11 @@ impl RayGen {
         let aspect = width.max(1) as f32 / height.max(1) as f32;
         let p = camera.projection(aspect);
         let (near, far) = camera.near_far();
+        let view = camera.view();
+        let rot = Mat4::from_mat3(glam::Mat3::from_mat4(view).transpose());
         Self {
-            view_inv: camera.view().inverse(),
+            view_inv: rot,
+            eye: camera.position,
             sx: p.x_axis.x,
             sy: p.y_axis.y,
             width: width as f32,
@@ -222,13 +229,13 @@ impl RayGen {
         let x = 2.0 * (col as f32 + 0.5) / self.width - 1.0;
         let y = 1.0 - 2.0 * (row as f32 + 0.5) / self.height;
         if self.ortho {
-            let origin = self.view_inv.transform_point3(Vec3::new(x / self.sx, y / self.sy, 0.0));
+            let origin = self.eye + self.view_inv.transform_vector3(Vec3::new(x / self.sx, y / self.sy, 0.0));
             let dir = self.view_inv.transform_vector3(Vec3::NEG_Z).normalize();
             PrimaryRay { origin, dir, dir_view_z: -1.0, t_min: self.near, t_max: self.far }
         } else {
             let dv = Vec3::new(x / self.sx, y / self.sy, -1.0).normalize();
             let dir = self.view_inv.transform_vector3(dv);
-            let origin = self.view_inv.w_axis.truncate();
+            let origin = self.eye;
             PrimaryRay { origin, dir, dir_view_z: dv.z, t_min: self.near / -dv.z, t_max: self.far / -dv.z }
         }
     }
@@ -351,11 +358,11 @@ impl PointCloudCapsule {
 
     /// Traces one primary ray: `Some((linear colour, t))` of the closest sphere before `t_max`.
     #[inline]
-    fn shade_ray(&self, ray: &PrimaryRay, t_max: f32) -> Option<(Vec3, f32)> {
+    fn shade_ray(&self, stack: &mut TraversalStack, ray: &PrimaryRay, t_max: f32) -> Option<(Vec3, f32)> {
         let mut best: Option<(f32, usize, u32)> = None;
         let mut limit = t_max;
         for (ci, cloud) in self.clouds.iter().enumerate() {
-            if let Some((t, slot)) = cloud.bvh.closest_hit_slot(ray.origin, ray.dir, ray.t_min, limit)
+            if let Some((t, slot)) = cloud.bvh.closest_hit_slot_with(stack, ray.origin, ray.dir, ray.t_min, limit)
                 && best.is_none_or(|b| t < b.0)
             {
                 best = Some((t, ci, slot));
@@ -407,6 +414,7 @@ impl RtCapsule for PointCloudCapsule {
                 .enumerate()
                 .map(|(row, texels)| {
                     let mut hits = 0;
+                    let mut stack = TraversalStack::default();
                     for (col, texel) in texels.iter_mut().enumerate() {
                         let ray = raygen.ray(col as u32, row as u32);
                         let mut t_max = ray.t_max;
@@ -416,7 +424,7 @@ impl RtCapsule for PointCloudCapsule {
                                 t_max = t_max.min(raygen.t_at_depth(&ray, z));
                             }
                         }
-                        *texel = match this.shade_ray(&ray, t_max) {
+                        *texel = match this.shade_ray(&mut stack, &ray, t_max) {
                             Some((color, t)) => {
                                 hits += 1;
                                 // Block D then block P, fused as in the paper's ray-generation shader.

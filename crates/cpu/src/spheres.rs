@@ -24,8 +24,18 @@ const BINS: usize = 16;
 const PARALLEL_MIN: usize = 16 * 1024;
 /// Leaf reference flag; a leaf reference holds `start << 4 | count`.
 const LEAF: u32 = 1 << 31;
-/// Traversal stack depth (the build's depth is bounded well below this: see `build_node`).
+/// Traversal stack capacity reserved up front (the build bounds the depth by 64 + log2(n)).
 const STACK: usize = 96;
+
+/// A reusable traversal stack (subtree reference, entry distance).
+#[derive(Debug, Clone)]
+pub struct TraversalStack(Vec<(u32, f32)>);
+
+impl Default for TraversalStack {
+    fn default() -> Self {
+        Self(Vec::with_capacity(STACK))
+    }
+}
 /// Largest number of spheres (leaf starts have 27 bits).
 pub const MAX_SPHERES: usize = 1 << 27;
 
@@ -196,6 +206,11 @@ impl SphereBvh {
     /// As [`SphereBvh::closest_hit`], but returns the sphere's leaf-order slot (see
     /// [`SphereBvh::center_of_slot`], [`SphereBvh::index_of_slot`]).
     pub fn closest_hit_slot(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
+        self.closest_hit_slot_with(&mut TraversalStack::default(), origin, dir, t_min, t_max)
+    }
+
+    /// As [`SphereBvh::closest_hit_slot`], reusing `stack` (one per thread saves its set-up per ray).
+    pub fn closest_hit_slot_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
         if self.centers.is_empty() {
             return None;
         }
@@ -213,8 +228,8 @@ impl SphereBvh {
         let mut best_t = ray.t_max;
         let mut best = u32::MAX;
         let mut best_slot = 0u32;
-        let mut stack = [(0u32, 0f32); STACK];
-        let mut sp = 0usize;
+        let stack = &mut stack.0;
+        stack.clear();
         let mut cur = self.root;
         loop {
             if cur & LEAF != 0 {
@@ -239,10 +254,7 @@ impl SphereBvh {
                 match (h0, h1) {
                     (true, true) => {
                         let (near, far, far_e) = if e0 <= e1 { (n.child[0], n.child[1], e1) } else { (n.child[1], n.child[0], e0) };
-                        if sp < STACK {
-                            stack[sp] = (far, far_e);
-                            sp += 1;
-                        }
+                        stack.push((far, far_e));
                         cur = near;
                         continue;
                     }
@@ -259,11 +271,9 @@ impl SphereBvh {
             }
             // Pop the next subtree that can still hold a closer hit.
             loop {
-                if sp == 0 {
+                let Some((r, e)) = stack.pop() else {
                     return if best == u32::MAX { None } else { Some((best_t / len, best_slot)) };
-                }
-                sp -= 1;
-                let (r, e) = stack[sp];
+                };
                 if e <= best_t {
                     cur = r;
                     break;
@@ -367,17 +377,16 @@ struct Bin {
 const EMPTY_BIN: Bin = Bin { count: 0, b: Bounds::EMPTY };
 
 /// Bins of one range along all three axes.
-fn bin_items(items: &[Item], cmin: Vec3, scale: Vec3) -> [[Bin; BINS]; 3] {
+/// Bins of one range along `axis` (the others stay empty).
+fn bin_items(items: &[Item], cmin: Vec3, scale: Vec3, axis: usize) -> [[Bin; BINS]; 3] {
     let mut bins = [[EMPTY_BIN; BINS]; 3];
+    let (lo, sc) = (cmin[axis], scale[axis]);
+    let row = &mut bins[axis];
     for it in items {
-        let c = Vec3::from(it.c);
-        let f = (c - cmin) * scale;
-        for axis in 0..3 {
-            let k = (f[axis] as usize).min(BINS - 1);
-            let bin = &mut bins[axis][k];
-            bin.count += 1;
-            bin.b.grow(c);
-        }
+        let k = (((it.c[axis] - lo) * sc) as usize).min(BINS - 1);
+        let bin = &mut row[k];
+        bin.count += 1;
+        bin.b.grow(Vec3::from(it.c));
     }
     bins
 }
@@ -405,16 +414,19 @@ fn build_node(items: &mut [Item], base: usize, cb: Bounds, r: f32, depth: u32) -
     // Past depth 64 (pathological distributions) halve by count, which bounds the depth.
     if extent.max_element() > 0.0 && depth < 64 {
         let scale = Vec3::select(extent.cmpgt(Vec3::ZERO), Vec3::splat(BINS as f32) / extent, Vec3::ZERO);
+        // Bin along the widest axis only (a third of the work of all three; for point clouds the
+        // widest axis nearly always holds the best split).
+        let main = extent.max_position();
         let bins = if n >= PARALLEL_MIN {
             use rayon::prelude::*;
-            items.par_chunks(PARALLEL_MIN).map(|c| bin_items(c, cb.min, scale)).reduce(|| [[EMPTY_BIN; BINS]; 3], merge_bins)
+            items.par_chunks(PARALLEL_MIN).map(|c| bin_items(c, cb.min, scale, main)).reduce(|| [[EMPTY_BIN; BINS]; 3], merge_bins)
         } else {
-            bin_items(items, cb.min, scale)
+            bin_items(items, cb.min, scale, main)
         };
         // SAH: sweep from the right, then from the left.
         let mut best_cost = f32::INFINITY;
         for axis in 0..3 {
-            if extent[axis] <= 0.0 {
+            if extent[axis] <= 0.0 || axis != main {
                 continue;
             }
             let b = &bins[axis];
