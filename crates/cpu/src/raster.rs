@@ -36,6 +36,9 @@ const HALF: i64 = SUB / 2;
 const GUARD_PX: f32 = 8192.0;
 /// Triangles per setup task (fixed, so binning order never depends on the thread count).
 const SETUP_CHUNK: usize = 8192;
+/// Visibility ids are `chunk << CHUNK_SHIFT | index in chunk` (in scene order). Clipping makes at
+/// most 6 screen triangles of one scene triangle, so a chunk holds < 6 · 8192 < 2¹⁶ of them.
+const CHUNK_SHIFT: u32 = 16;
 
 /// Visibility-buffer ids: nothing drawn / RT layer visible.
 const VIS_NONE: u32 = u32::MAX;
@@ -522,9 +525,10 @@ impl Edges {
     }
 }
 
-/// Calls `hit(x, y)` for every pixel centre of rows `rows` covered by `t` (top-left rule).
+/// Calls `hit(x, y, covered)` for every pixel centre of the bounding box of `t` in rows `rows`;
+/// `covered` by the top-left rule. (Every box pixel, so callers can update branch-free.)
 #[inline]
-fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnMut(u32, u32)) {
+fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnMut(u32, u32, bool)) {
     let y_start = t.y0.max(rows.start);
     let y_end = (t.y1 + 1).min(rows.end);
     if y_start >= y_end {
@@ -536,9 +540,7 @@ fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnM
     for y in y_start..y_end {
         let [mut e0, mut e1, mut e2] = row;
         for x in t.x0..=t.x1 {
-            if (e0 | e1 | e2) >= 0 {
-                hit(x, y);
-            }
+            hit(x, y, (e0 | e1 | e2) >= 0);
             e0 += step[0];
             e1 += step[1];
             e2 += step[2];
@@ -657,10 +659,9 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     let bands = height.div_ceil(BAND_ROWS) as usize;
     let chunk_starts: Vec<usize> = (0..prepared.triangles.len()).step_by(SETUP_CHUNK).collect();
     let chunks: Vec<Chunk> = chunk_starts.par_iter().map(|&first| setup_chunk(first, prepared, &verts, &vpt, bands)).collect();
-    let mut offsets = Vec::with_capacity(chunks.len() + 1);
-    offsets.push(0u32);
-    for c in &chunks {
-        offsets.push(offsets[offsets.len() - 1] + c.raster.len() as u32);
+    if chunks.len() >= (VIS_RT >> CHUNK_SHIFT) as usize {
+        tracing::error!(triangles = prepared.triangles.len(), "too many triangles for the rasteriser's visibility ids");
+        return;
     }
 
     // Pass 3: bands (visibility, then shading of the winners).
@@ -668,7 +669,7 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     let w = width as usize;
     let band_len = w * BAND_ROWS as usize;
     let rows = split_bands(g, band_len);
-    let ctx = BandContext { prepared, chunks: &chunks, offsets: &offsets, rt_layer, unproject: &unproject, width, height, clear };
+    let ctx = BandContext { prepared, chunks: &chunks, rt_layer, unproject: &unproject, width, height, clear };
     rows.into_par_iter()
         .enumerate()
         .with_max_len(1)
@@ -678,7 +679,6 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
 struct BandContext<'a, 's> {
     prepared: &'a PreparedScene<'s>,
     chunks: &'a [Chunk],
-    offsets: &'a [u32],
     rt_layer: Option<&'a RtLayer>,
     unproject: &'a Unproject,
     width: u32,
@@ -710,19 +710,19 @@ impl BandContext<'_, '_> {
 
         // Visibility: scene order, strict Greater → the earlier triangle keeps ties.
         for (ci, chunk) in self.chunks.iter().enumerate() {
-            let first = self.offsets[ci];
+            let first = (ci as u32) << CHUNK_SHIFT;
             for &local in chunk.bin(band) {
                 let t = &chunk.raster[local as usize];
                 let id = first + local;
                 let (z0, dzdx, dzdy) = (t.z0, t.dzdx, t.dzdy);
                 let (rx, ry) = (t.x0, t.y0);
-                for_each_covered(t, y_lo..y_hi, |x, y| {
+                for_each_covered(t, y_lo..y_hi, |x, y, covered| {
                     let z = (z0 + dzdx * (x - rx) as f32 + dzdy * (y - ry) as f32).min(1.0);
                     let i = (y - y_lo) as usize * w + x as usize;
-                    if z > depth[i] {
-                        depth[i] = z;
-                        ids[i] = id;
-                    }
+                    let (d, o) = (depth[i], ids[i]);
+                    let win = covered & (z > d);
+                    depth[i] = if win { z } else { d };
+                    ids[i] = if win { id } else { o };
                 });
             }
         }
@@ -744,8 +744,7 @@ impl BandContext<'_, '_> {
                     }
                 }
                 id => {
-                    let ci = self.offsets.partition_point(|&o| o <= id) - 1;
-                    let st = &self.chunks[ci].shade[(id - self.offsets[ci]) as usize];
+                    let st = &self.chunks[(id >> CHUNK_SHIFT) as usize].shade[(id & ((1 << CHUNK_SHIFT) - 1)) as usize];
                     let (object, s) = self.shade(st, x, y);
                     out.write(i, object, depth[i], &s);
                     if self.clear {
@@ -811,7 +810,7 @@ mod tests {
         let mut c = vec![0u32; (w * h) as usize];
         for t in tris {
             if let Some(rt) = coverage(*t, &v) {
-                for_each_covered(&rt, 0..h, |x, y| c[(y * w + x) as usize] += 1);
+                for_each_covered(&rt, 0..h, |x, y, covered| c[(y * w + x) as usize] += u32::from(covered));
             }
         }
         c
