@@ -24,9 +24,8 @@ pub const ALPHA_DISCARD: f32 = 0.1;
 #[inline]
 pub fn pack_unorm4x8(c: [f32; 4]) -> u32 {
     let q = |v: f32| -> u32 {
-        // `max`/`min` return the non-NaN operand, so NaN becomes 0.
-        let v = v.max(0.0).min(1.0);
-        (0.5 + 255.0 * v).floor() as u32
+        // NaN stays NaN through `clamp` and casts to 0.
+        (0.5 + 255.0 * v.clamp(0.0, 1.0)).floor() as u32
     };
     q(c[0]) | (q(c[1]) << 8) | (q(c[2]) << 16) | (q(c[3]) << 24)
 }

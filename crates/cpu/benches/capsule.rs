@@ -71,7 +71,12 @@ fn scan() -> Vec<Vec3> {
 
 fn lights() -> Lights {
     Lights {
-        directional: vec![DirectionalLight { direction: Vec3::new(-0.4, -1.0, -0.3).normalize(), color: Vec3::ONE, intensity: 2.5, casts_shadows: false }],
+        directional: vec![DirectionalLight {
+            direction: Vec3::new(-0.4, -1.0, -0.3).normalize(),
+            color: Vec3::ONE,
+            intensity: 2.5,
+            casts_shadows: false,
+        }],
         ..Lights::default()
     }
 }

@@ -253,7 +253,8 @@ impl RayGen {
     /// The `t` along `ray` at which it reaches reversed-Z depth `z_w` (inverse of block D).
     #[inline]
     pub fn t_at_depth(&self, ray: &PrimaryRay, z_w: f32) -> f32 {
-        let z_e = if self.ortho { view_z_from_depth_orthographic(z_w, self.near, self.far) } else { view_z_from_depth(z_w, self.near, self.far) };
+        let z_e =
+            if self.ortho { view_z_from_depth_orthographic(z_w, self.near, self.far) } else { view_z_from_depth(z_w, self.near, self.far) };
         z_e / ray.dir_view_z
     }
 }
@@ -283,7 +284,10 @@ enum CloudColor {
     /// sRGB colours from the file, by original point index.
     File(Vec<[u8; 3]>),
     Uniform(Vec3),
-    Height { y_min: f32, inv_range: f32 },
+    Height {
+        y_min: f32,
+        inv_range: f32,
+    },
 }
 
 struct Cloud {
@@ -303,7 +307,9 @@ impl Cloud {
                 HEIGHT_LOW.lerp(HEIGHT_HIGH, h)
             }
             CloudColor::File(colors) => match colors.get(self.bvh.index_of_slot(slot) as usize) {
-                Some(c) => Vec3::new(srgb_to_linear(c[0] as f32 / 255.0), srgb_to_linear(c[1] as f32 / 255.0), srgb_to_linear(c[2] as f32 / 255.0)),
+                Some(c) => {
+                    Vec3::new(srgb_to_linear(c[0] as f32 / 255.0), srgb_to_linear(c[1] as f32 / 255.0), srgb_to_linear(c[2] as f32 / 255.0))
+                }
                 None => HEIGHT_LOW,
             },
         }
@@ -335,7 +341,9 @@ impl PointCloudCapsule {
             let color = match &pc.coloring {
                 PointColoring::Uniform(c) => CloudColor::Uniform(*c),
                 PointColoring::Height => height(),
-                PointColoring::FileOrHeight if pc.colors.len() == pc.points.len() && !pc.colors.is_empty() => CloudColor::File(pc.colors.clone()),
+                PointColoring::FileOrHeight if pc.colors.len() == pc.points.len() && !pc.colors.is_empty() => {
+                    CloudColor::File(pc.colors.clone())
+                }
                 PointColoring::FileOrHeight => height(),
             };
             built.push(Cloud { bvh, color, specular: pc.specular, shininess: pc.shininess });
@@ -346,10 +354,7 @@ impl PointCloudCapsule {
 
     /// Bytes of the BVHs, sphere centres and colours.
     pub fn bytes(&self) -> usize {
-        self.clouds
-            .iter()
-            .map(|c| c.bvh.bytes() + if let CloudColor::File(v) = &c.color { v.len() * 3 } else { 0 })
-            .sum()
+        self.clouds.iter().map(|c| c.bvh.bytes() + if let CloudColor::File(v) = &c.color { v.len() * 3 } else { 0 }).sum()
     }
 
     pub fn build_ms(&self) -> f64 {

@@ -215,7 +215,8 @@ impl SphereBvh {
             return None;
         }
         let len = dir.length();
-        if !(len > 0.0 && len.is_finite()) || !(t_max >= t_min) {
+        let usable = len > 0.0 && len.is_finite() && t_max >= t_min;
+        if !usable {
             return None;
         }
         let d = dir / len;
