@@ -3,7 +3,7 @@
 //! intermediate `Vec` of elements, no per-property `HashMap`.
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, Seek};
+use std::io::{BufRead, BufReader, Read, Seek};
 use std::path::Path;
 
 use glam::{Vec2, Vec3};
@@ -24,7 +24,36 @@ struct Vertex {
     c: [f32; 3],
 }
 
+/// Which vertex field a property fills (0–2 position, 3–5 normal, 6–7 UV, 8–10 colour).
+fn slot_of(name: &str) -> Option<usize> {
+    Some(match name {
+        "x" => 0,
+        "y" => 1,
+        "z" => 2,
+        "nx" => 3,
+        "ny" => 4,
+        "nz" => 5,
+        "u" | "s" | "texture_u" | "texture_s" => 6,
+        "v" | "t" | "texture_v" | "texture_t" => 7,
+        "red" | "diffuse_red" | "r" => 8,
+        "green" | "diffuse_green" | "g" => 9,
+        "blue" | "diffuse_blue" | "b" => 10,
+        _ => return None,
+    })
+}
+
 impl Vertex {
+    #[inline]
+    fn set_slot(&mut self, slot: usize, v: f32) {
+        match slot {
+            0..=2 => self.p[slot] = v,
+            3..=5 => self.n[slot - 3] = v,
+            6 | 7 => self.uv[slot - 6] = v,
+            8..=10 => self.c[slot - 8] = v,
+            _ => {}
+        }
+    }
+
     #[inline]
     fn set(&mut self, name: &str, v: f32) -> PropertyAccessResult {
         match name {
@@ -157,6 +186,30 @@ fn scalar_size(t: &ScalarType) -> usize {
     }
 }
 
+/// A binary scalar at the start of `b` as f32, with its type's maximum for integer types
+/// (used to normalise integer colours). `b` is at least the scalar's size (checked by the caller's
+/// record layout).
+#[inline]
+fn scalar(b: &[u8], t: &ScalarType, little: bool) -> (f32, Option<f32>) {
+    macro_rules! get {
+        ($ty:ty, $n:expr) => {{
+            let mut a = [0u8; $n];
+            a.copy_from_slice(&b[..$n]);
+            if little { <$ty>::from_le_bytes(a) } else { <$ty>::from_be_bytes(a) }
+        }};
+    }
+    match t {
+        ScalarType::Char => (get!(i8, 1) as f32, Some(127.0)),
+        ScalarType::UChar => (b[0] as f32, Some(255.0)),
+        ScalarType::Short => (get!(i16, 2) as f32, Some(32_767.0)),
+        ScalarType::UShort => (get!(u16, 2) as f32, Some(65_535.0)),
+        ScalarType::Int => (get!(i32, 4) as f32, Some(i32::MAX as f32)),
+        ScalarType::UInt => (get!(u32, 4) as f32, Some(u32::MAX as f32)),
+        ScalarType::Float => (get!(f32, 4), None),
+        ScalarType::Double => (get!(f64, 8) as f32, None),
+    }
+}
+
 /// Smallest number of bytes one element can take in the file.
 fn min_element_bytes(def: &ElementDef, encoding: Encoding) -> usize {
     def.properties
@@ -223,6 +276,66 @@ impl<'a> PlyFile<'a> {
         }
     }
 
+    /// Reads every vertex of `def` and hands it to `visit`. Binary vertex elements made only of
+    /// scalars (the common case, and every large file) are decoded straight from fixed record
+    /// offsets in chunks; anything else goes through ply-rs-bw element by element.
+    fn for_each_vertex(&mut self, def: &ElementDef, mut visit: impl FnMut(usize, &Vertex) -> Result<(), String>) -> Result<(), SceneError> {
+        let little = match self.header.encoding {
+            Encoding::BinaryLittleEndian => Some(true),
+            Encoding::BinaryBigEndian => Some(false),
+            Encoding::Ascii => None,
+        };
+        let scalars: Option<Vec<ScalarType>> = def
+            .properties
+            .values()
+            .map(|p| match &p.data_type {
+                PropertyType::Scalar(t) => Some(t.clone()),
+                PropertyType::List(..) => None,
+            })
+            .collect();
+        let (Some(little), Some(types)) = (little, scalars) else {
+            let parser = Parser::<Vertex>::new();
+            for i in 0..def.count {
+                let v = self.read(&parser, def, i)?;
+                visit(i, &v).map_err(|m| self.err(m))?;
+            }
+            return Ok(());
+        };
+        // (offset, type, slot) of every property we use; `stride` is the record size.
+        let mut fields = Vec::new();
+        let mut stride = 0;
+        for (name, t) in def.properties.keys().zip(&types) {
+            if let Some(slot) = slot_of(name) {
+                fields.push((stride, t.clone(), slot, is_color(name)));
+            }
+            stride += scalar_size(t);
+        }
+        const CHUNK: usize = 1 << 14;
+        let mut buf = vec![0u8; stride * CHUNK.min(def.count)];
+        let mut i = 0;
+        while i < def.count {
+            let n = CHUNK.min(def.count - i);
+            let bytes = &mut buf[..n * stride];
+            if let Err(e) = self.reader.get_mut().read_exact(bytes) {
+                return Err(self.err(if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                    format!("file ends early: the vertices from {i} on (of {}) are missing or cut off", def.count)
+                } else {
+                    format!("cannot read vertex {i} of {}: {e}", def.count)
+                }));
+            }
+            for (k, rec) in bytes.chunks_exact(stride).enumerate() {
+                let mut v = Vertex::default();
+                for (off, t, slot, color) in &fields {
+                    let (value, max) = scalar(&rec[*off..], t, little);
+                    v.set_slot(*slot, if *color { max.map_or(value, |m| value / m) } else { value });
+                }
+                visit(i + k, &v).map_err(|m| self.err(m))?;
+            }
+            i += n;
+        }
+        Ok(())
+    }
+
     fn skip(&mut self, def: &ElementDef) -> Result<(), SceneError> {
         let parser = Parser::<Skip>::new();
         for i in 0..def.count {
@@ -283,7 +396,6 @@ pub(super) fn load_points(path: &Path) -> Result<(Vec<Vec3>, Vec<[u8; 3]>), Scen
     f.header.encoding = header.encoding;
     let vdef = vertex_def(&f, &header)?;
     let lay = layout(vdef);
-    let parser = Parser::<Vertex>::new();
     let point_def = without_trailing_lists(vdef, header.encoding);
     for (name, def) in &header.elements {
         if name != "vertex" {
@@ -293,15 +405,15 @@ pub(super) fn load_points(path: &Path) -> Result<(Vec<Vec3>, Vec<[u8; 3]>), Scen
         let cap = capped_capacity(def.count, min_element_bytes(def, header.encoding), f.bytes_left());
         let mut points = Vec::with_capacity(cap);
         let mut colors = if lay.colors { Vec::with_capacity(cap) } else { Vec::new() };
-        for i in 0..def.count {
-            let v = f.read(&parser, &point_def, i)?;
+        f.for_each_vertex(&point_def, |i, v| {
             let p = Vec3::from(v.p);
-            check_finite("point", i, p).map_err(|m| f.err(m))?;
+            check_finite("point", i, p)?;
             points.push(p);
             if lay.colors {
                 colors.push(v.c.map(to_u8));
             }
-        }
+            Ok(())
+        })?;
         // Everything after the vertices (faces, ...) is not needed for a point cloud.
         return Ok((points, colors));
     }
@@ -320,7 +432,6 @@ pub(super) fn load_mesh(path: &Path, materials: &mut Vec<Material>) -> Result<Ve
         return Err(f.err("PLY file has no faces (use it as a point cloud)"));
     }
     let mut mesh = Mesh::default();
-    let vparser = Parser::<Vertex>::new();
     let fparser = Parser::<Face>::new();
     for (name, def) in &header.elements {
         let cap = capped_capacity(def.count, min_element_bytes(def, header.encoding), f.bytes_left());
@@ -336,10 +447,9 @@ pub(super) fn load_mesh(path: &Path, materials: &mut Vec<Material>) -> Result<Ve
                 if lay.colors {
                     mesh.colors.reserve_exact(cap);
                 }
-                for i in 0..def.count {
-                    let v = f.read(&vparser, def, i)?;
+                f.for_each_vertex(def, |i, v| {
                     let p = Vec3::from(v.p);
-                    check_finite("vertex", i, p).map_err(|m| f.err(m))?;
+                    check_finite("vertex", i, p)?;
                     mesh.positions.push(p);
                     if lay.normals {
                         let n = Vec3::from(v.n);
@@ -353,7 +463,8 @@ pub(super) fn load_mesh(path: &Path, materials: &mut Vec<Material>) -> Result<Ve
                     if lay.colors {
                         mesh.colors.push(Vec3::from(v.c.map(|c| srgb_to_linear(c.clamp(0.0, 1.0)))));
                     }
-                }
+                    Ok(())
+                })?;
             }
             "face" => {
                 // Most faces are triangles: one triangle per face is the usual count.
@@ -422,6 +533,34 @@ mod tests {
         let (pts, cols) = load_points(&p).unwrap();
         assert_eq!(pts.len(), 4);
         assert_eq!(cols, vec![[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 255]]);
+    }
+
+    #[test]
+    fn binary_fast_path_matches_ascii() {
+        let dir = tempfile::tempdir().unwrap();
+        let head = |fmt: &str| {
+            format!(
+                "ply\nformat {fmt} 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n\
+                 property uchar target_count\nproperty ushort red\nproperty uchar green\nproperty float blue\nend_header\n"
+            )
+        };
+        let ascii = head("ascii") + "1 2 3 7 65535 0 0.5\n-1 0.25 8 9 0 255 1\n";
+        let mut bin = head("binary_little_endian").into_bytes();
+        for (p, t, r, g, b) in [([1f32, 2., 3.], 7u8, 65_535u16, 0u8, 0.5f32), ([-1., 0.25, 8.], 9, 0, 255, 1.0)] {
+            p.iter().for_each(|c| bin.extend_from_slice(&c.to_le_bytes()));
+            bin.push(t);
+            bin.extend_from_slice(&r.to_le_bytes());
+            bin.push(g);
+            bin.extend_from_slice(&b.to_le_bytes());
+        }
+        let a = load_points(&write(dir.path(), "a.ply", ascii.as_bytes())).unwrap();
+        let b = load_points(&write(dir.path(), "b.ply", &bin)).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(b.0[1], Vec3::new(-1.0, 0.25, 8.0));
+        assert_eq!(b.1, vec![[255, 0, 128], [0, 255, 255]]);
+        // Cut inside the second record: a clean error.
+        let e = load_points(&write(dir.path(), "cut.ply", &bin[..bin.len() - 3])).unwrap_err();
+        assert!(e.message.contains("ends early"), "{e}");
     }
 
     #[test]
