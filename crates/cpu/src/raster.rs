@@ -306,8 +306,9 @@ struct ClipVert {
 
 fn setup_chunk(first: usize, prepared: &PreparedScene, verts: &[Vec<PVert>], vpt: &Viewport, bands: usize) -> Chunk {
     let end = (first + SETUP_CHUNK).min(prepared.triangles.len());
-    let mut raster = Vec::new();
-    let mut shade = Vec::new();
+    // Sized for every triangle up front: no reallocation while filling.
+    let mut raster = Vec::with_capacity(end - first);
+    let mut shade = Vec::with_capacity(end - first);
     for (g, t) in prepared.triangles[first..end].iter().enumerate() {
         let g = (first + g) as u32;
         let mesh = &prepared.meshes[t.mesh as usize];
