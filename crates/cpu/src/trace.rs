@@ -12,8 +12,8 @@
 //! - At a hit with reflectivity `r` and transparency `τ`: "reflection-luminance" is the
 //!   luminance of the grey reflectivity colour, i.e. `r` (the luminance weights sum to 1), so
 //!   the child importance is `imp·r` (resp. `imp·τ`); the child is traced when that exceeds
-//!   `scene.trace.importance_cutoff` and the depth is below `scene.trace.max_depth`, and gets
-//!   depth + 1. Untraced children contribute 0.
+//!   `scene.trace.importance_cutoff` and the depth is below `scene.trace.max_depth` (capped at
+//!   [`MAX_TRACE_DEPTH`]), and gets depth + 1. Untraced children contribute 0.
 //! - Local lighting (listing 5, unshadowed) is computed unless `r ≥ 1` or `τ ≥ 1`; at
 //!   depth ≥ max depth both children are replaced by it; the result is
 //!   `combine(lighting, refl, refr, r, τ)` (the eq. 5/6 average, = color1/color2 of 8c).
@@ -71,6 +71,10 @@ pub struct TraceOutput {
     /// Shadow, reflection and refraction rays traced (primary = 0: see [`primary_ray_count`]).
     pub rays: RayCounts,
 }
+
+/// Recursion limit whatever `scene.trace.max_depth` says, so a huge setting between two perfect
+/// mirrors cannot overflow a thread's stack.
+pub const MAX_TRACE_DEPTH: u32 = 64;
 
 /// Pixels per parallel work item (uneven ray cost: items are handed out one at a time).
 const CHUNK: usize = 64;
@@ -190,24 +194,25 @@ impl Tracer<'_, '_> {
         };
         let s = self.prepared.surface_at(hit.triangle, hit.bary, 0.0);
         let settings = &scene.trace;
+        let max_depth = settings.max_depth.min(MAX_TRACE_DEPTH);
         let reflectivity = s.reflectivity;
         let transparency = 1.0 - s.opacity;
 
         let mut refl = Vec3::ZERO;
         let refl_imp = importance * reflectivity;
-        if refl_imp > settings.importance_cutoff && depth < settings.max_depth {
+        if refl_imp > settings.importance_cutoff && depth < max_depth {
             let d = reflect(dir, s.normal).normalize_or_zero();
             refl = self.secondary(self.offset(&s, d), d, refl_imp, depth + 1, Kind::Reflection, rays);
         }
         let mut refr = Vec3::ZERO;
         let refr_imp = importance * transparency;
-        if refr_imp > settings.importance_cutoff && depth < settings.max_depth {
+        if refr_imp > settings.importance_cutoff && depth < max_depth {
             let (d, _tir) = refract_or_reflect(dir, s.normal, scene.environment.ior, s.ior);
             refr = self.secondary(self.offset(&s, d), d, refr_imp, depth + 1, Kind::Refraction, rays);
         }
         let lighting =
             if reflectivity < 1.0 && transparency < 1.0 { local_lighting(&s, -dir, &scene.lights, &scene.environment) } else { Vec3::ZERO };
-        if depth >= settings.max_depth {
+        if depth >= max_depth {
             refl = lighting;
             refr = lighting;
         }

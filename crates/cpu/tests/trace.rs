@@ -363,3 +363,31 @@ fn deterministic_with_one_or_two_threads() {
     assert!(o1.shadow.iter().any(|s| s.x < 0.9));
     assert!(o1.reflection.iter().zip(&g1.optical).any(|(r, o)| o.x > 0.5 && *r != SKY && *r != Vec3::ZERO));
 }
+
+#[test]
+fn facing_mirrors_stop_at_max_depth() {
+    // Two perfect mirrors 2 m apart: the reflection ray bounces until max depth, where listing 8c
+    // replaces both children by the lighting (0 on a fully reflective surface).
+    let mirror = Material { reflectivity: 1.0, emission: Vec3::splat(0.5), ..Default::default() };
+    let mut s = scene(
+        vec![mirror],
+        vec![quad(Vec3::ZERO, Vec3::X, Vec3::Y, 0), quad(Vec3::new(0.0, 0.0, 2.0), Vec3::X, -Vec3::Y, 0)],
+        Lights::default(),
+        camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO),
+    );
+    let p = Surface { position: Vec3::ZERO, normal: Vec3::Z, opacity: 1.0, reflectivity: 1.0, ior: 1.5, ..Default::default() };
+    for (max_depth, rays) in [(1, 1), (5, 5), (1_000_000, hybrid_cpu::trace::MAX_TRACE_DEPTH as u64)] {
+        s.trace.max_depth = max_depth;
+        let out = run(&s, &one_pixel(&p));
+        assert_eq!(out.rays.reflection, rays, "max depth {max_depth}");
+        assert_eq!(out.reflection[0], Vec3::ZERO);
+    }
+    // A 0.5-reflective mirror pair: ray k carries importance 0.5^k; ray 7 would carry
+    // 0.5^7 = 0.0078 < cutoff 0.01, so the chain stops at 6 rays although max depth is 10.
+    s.materials[0].reflectivity = 0.5;
+    s.trace.max_depth = 10;
+    let half = Surface { reflectivity: 0.5, ..p };
+    let out = run(&s, &one_pixel(&half));
+    assert_eq!(out.rays.reflection, 6);
+    assert!(out.reflection[0].x > 0.0);
+}
