@@ -210,6 +210,25 @@ fn scalar(b: &[u8], t: &ScalarType, little: bool) -> (f32, Option<f32>) {
     }
 }
 
+/// A binary integer scalar (None for float types).
+fn int_scalar(b: &[u8], t: &ScalarType, little: bool) -> Option<i64> {
+    let (v, max) = scalar(b, t, little);
+    match t {
+        // f32 is not exact above 2^24: decode 32-bit integers directly.
+        ScalarType::Int => Some(i64::from(if little {
+            i32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        } else {
+            i32::from_be_bytes([b[0], b[1], b[2], b[3]])
+        })),
+        ScalarType::UInt => Some(i64::from(if little {
+            u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        } else {
+            u32::from_be_bytes([b[0], b[1], b[2], b[3]])
+        })),
+        _ => max.map(|_| v as i64),
+    }
+}
+
 /// Smallest number of bytes one element can take in the file.
 fn min_element_bytes(def: &ElementDef, encoding: Encoding) -> usize {
     def.properties
@@ -332,6 +351,76 @@ impl<'a> PlyFile<'a> {
                 visit(i + k, &v).map_err(|m| self.err(m))?;
             }
             i += n;
+        }
+        Ok(())
+    }
+
+    /// Reads every face of `def` and hands its vertex indices to `visit`. Binary files are read
+    /// directly (one reused index buffer, no allocation per face); ASCII through ply-rs-bw.
+    fn for_each_face(
+        &mut self,
+        def: &ElementDef,
+        parser: &Parser<Face>,
+        mut visit: impl FnMut(usize, &[u32]) -> Result<(), String>,
+    ) -> Result<(), SceneError> {
+        let little = match self.header.encoding {
+            Encoding::BinaryLittleEndian => true,
+            Encoding::BinaryBigEndian => false,
+            Encoding::Ascii => {
+                let mut idx = Vec::new();
+                for i in 0..def.count {
+                    let face = self.read(parser, def, i)?;
+                    idx.clear();
+                    if face.unsigned.is_empty() {
+                        for &s in &face.signed {
+                            idx.push(u32::try_from(s).map_err(|_| self.err(format!("face {i} has a negative vertex index {s}")))?);
+                        }
+                    } else {
+                        idx.extend_from_slice(&face.unsigned);
+                    }
+                    visit(i, &idx).map_err(|m| self.err(m))?;
+                }
+                return Ok(());
+            }
+        };
+        let props: Vec<(bool, PropertyType)> = def.properties.iter().map(|(k, p)| (is_index_list(k), p.data_type.clone())).collect();
+        let mut idx: Vec<u32> = Vec::new();
+        let mut item = [0u8; 8];
+        for i in 0..def.count {
+            idx.clear();
+            for (is_indices, t) in &props {
+                let eof = |e: std::io::Error| {
+                    if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                        format!("file ends early: face {i} of {} is cut off", def.count)
+                    } else {
+                        format!("cannot read face {i} of {}: {e}", def.count)
+                    }
+                };
+                let r = self.reader.get_mut();
+                match t {
+                    PropertyType::Scalar(st) => r.read_exact(&mut item[..scalar_size(st)]).map_err(|e| self.err(eof(e)))?,
+                    PropertyType::List(ct, it) => {
+                        let cs = scalar_size(ct);
+                        r.read_exact(&mut item[..cs]).map_err(|e| self.err(eof(e)))?;
+                        let (count, _) = scalar(&item[..cs], ct, little);
+                        if !(0.0..=16_777_216.0).contains(&count) {
+                            return Err(self.err(format!("face {i} has a list of {count} entries")));
+                        }
+                        let size = scalar_size(it);
+                        for _ in 0..count as usize {
+                            let r = self.reader.get_mut();
+                            r.read_exact(&mut item[..size]).map_err(|e| self.err(eof(e)))?;
+                            if *is_indices {
+                                let v = int_scalar(&item[..size], it, little)
+                                    .ok_or_else(|| self.err(format!("face {i}: vertex indices of type {it:?} are not integers")))?;
+                                let v = u32::try_from(v).map_err(|_| self.err(format!("face {i} has a negative vertex index {v}")))?;
+                                idx.push(v);
+                            }
+                        }
+                    }
+                }
+            }
+            visit(i, &idx).map_err(|m| self.err(m))?;
         }
         Ok(())
     }
@@ -469,22 +558,13 @@ pub(super) fn load_mesh(path: &Path, materials: &mut Vec<Material>) -> Result<Ve
             "face" => {
                 // Most faces are triangles: one triangle per face is the usual count.
                 mesh.indices.reserve_exact(cap);
-                for i in 0..def.count {
-                    let face = f.read(&fparser, def, i)?;
-                    let idx: Vec<u32> = if face.unsigned.is_empty() {
-                        let mut out = Vec::with_capacity(face.signed.len());
-                        for &s in &face.signed {
-                            out.push(u32::try_from(s).map_err(|_| f.err(format!("face {i} has a negative vertex index {s}")))?);
-                        }
-                        out
-                    } else {
-                        face.unsigned
-                    };
+                f.for_each_face(def, &fparser, |_, idx| {
                     // Polygons become triangle fans; faces with fewer than 3 vertices are dropped.
                     for k in 1..idx.len().saturating_sub(1) {
                         mesh.indices.push([idx[0], idx[k], idx[k + 1]]);
                     }
-                }
+                    Ok(())
+                })?;
             }
             _ => f.skip(def)?,
         }
