@@ -1,0 +1,173 @@
+//! The `hybrid` binary end to end: exit codes, error messages, and that bad input never leaves
+//! an output file behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn hybrid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hybrid")).args(args).output().expect("run hybrid")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn scenes() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn renders_the_demo_scene_with_report_and_dump() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo.png");
+    let report = dir.path().join("report.json");
+    let dump = dir.path().join("dump");
+    let o = hybrid(&[
+        "render",
+        "--size",
+        "64x36",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+        "--dump",
+        dump.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&out).unwrap();
+    assert_eq!((img.width(), img.height()), (64, 36));
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    for key in ["backend", "size", "mode", "timings_ms", "rays", "triangles", "objects", "heuristic"] {
+        assert!(json.get(key).is_some(), "report lacks `{key}`");
+    }
+    for key in ["raster", "heuristic", "trace", "blend", "frame"] {
+        assert!(json["timings_ms"][key].is_number(), "timings_ms lacks `{key}`");
+    }
+    for key in ["primary", "shadow", "reflection", "refraction"] {
+        assert!(json["rays"][key].is_number(), "rays lacks `{key}`");
+    }
+    assert_eq!(json["backend"], "cpu");
+    assert_eq!(json["size"], serde_json::json!([64, 36]));
+    let names = files_in(&dump);
+    for b in [
+        "position",
+        "normal",
+        "emission",
+        "ambient",
+        "diffuse",
+        "specular",
+        "optical",
+        "mask",
+        "depth",
+        "lighting",
+        "shadow",
+        "reflection",
+        "refraction",
+        "final",
+        "object_id",
+    ] {
+        assert!(names.contains(&format!("{b}.png")), "dump lacks {b}.png: {names:?}");
+    }
+    for b in ["position", "normal", "depth", "lighting", "shadow", "reflection", "refraction", "mask"] {
+        assert!(names.contains(&format!("{b}.exr")), "dump lacks {b}.exr: {names:?}");
+    }
+    // object_id.png is 16-bit grey holding id + 1.
+    let ids = image::open(dump.join("object_id.png")).unwrap();
+    assert!(matches!(ids, image::DynamicImage::ImageLuma16(_)), "object_id.png must be 16-bit grey");
+    // The final dump equals the output image.
+    assert_eq!(image::open(dump.join("final.png")).unwrap().to_rgba8(), img.to_rgba8());
+    // No temporary files are left behind.
+    assert!(files_in(dir.path()).iter().all(|n| !n.contains("partial")), "{:?}", files_in(dir.path()));
+}
+
+/// Runs a render that must fail with exit code 2, a message containing every `needle`, and no
+/// output image.
+fn assert_bad_input(extra: &[&str], needles: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let mut args = vec!["render", "--quiet", "--size", "32x18", "-o", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let o = hybrid(&args);
+    assert_eq!(o.status.code(), Some(2), "args {args:?}: {}", stderr(&o));
+    let err = stderr(&o);
+    for n in needles {
+        assert!(err.contains(n), "message lacks `{n}`: {err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(files_in(dir.path()).is_empty(), "bad input left files: {:?}", files_in(dir.path()));
+}
+
+#[test]
+fn bad_scene_files_exit_2_naming_the_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "[camera]\nfov = 200\n").unwrap();
+    assert_bad_input(&[bad.to_str().unwrap()], &["bad.toml", ":2:", "fov"]);
+    std::fs::write(&bad, "[camera\n").unwrap();
+    assert_bad_input(&[bad.to_str().unwrap()], &["bad.toml", ":1:"]);
+    assert_bad_input(&["/nonexistent/scene.toml"], &["/nonexistent/scene.toml"]);
+}
+
+#[test]
+fn broken_model_referenced_by_a_scene_exits_2_naming_the_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/broken-models/ply/truncated_binary_dragon_res4.ply");
+    let scene = dir.path().join("s.toml");
+    std::fs::write(&scene, format!("[[object]]\nmodel = {:?}\n", assets.to_str().unwrap())).unwrap();
+    assert_bad_input(&[scene.to_str().unwrap()], &["truncated_binary_dragon_res4.ply"]);
+}
+
+#[test]
+fn bad_flags_exit_2() {
+    assert_bad_input(&["--size", "0x10"], &["size"]);
+    assert_bad_input(&["--mode", "fastest"], &["mode"]);
+    assert_bad_input(&["--time", "nan"], &["--time"]);
+    assert_bad_input(&["--budget=-5"], &["--budget"]);
+}
+
+#[test]
+fn time_without_camera_path_and_gpu_backend_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("nopath.toml");
+    std::fs::write(&scene, "[[material]]\nname = \"m\"\n[[object]]\nprimitive = \"cube\"\nmaterial = \"m\"\n").unwrap();
+    assert_bad_input(&[scene.to_str().unwrap(), "--time", "1.0"], &["camera_path"]);
+    assert_bad_input(&["--backend", "gpu"], &["GPU"]);
+}
+
+#[test]
+fn unwritable_output_locations_fail_before_rendering() {
+    let o = hybrid(&["render", "--quiet", "--size", "8x8", "-o", "/nonexistent-dir/out.png"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("/nonexistent-dir"), "{}", stderr(&o));
+    let dir = tempfile::tempdir().unwrap();
+    let blocker = dir.path().join("file");
+    std::fs::write(&blocker, b"").unwrap();
+    let dump = blocker.join("dump"); // a folder inside a file cannot be created
+    let out = dir.path().join("o.png");
+    let o = hybrid(&["render", "--quiet", "--size", "8x8", "-o", out.to_str().unwrap(), "--dump", dump.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(!out.exists());
+}
+
+#[test]
+fn inspect_prints_table_4_json_keys() {
+    let o = hybrid(&["inspect", "--json", scenes().join("demo.toml").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in ["vertices", "triangles", "objects", "reflective_objects", "refractive_objects", "lights", "points", "bounds"] {
+        assert!(json.get(key).is_some(), "inspect --json lacks `{key}`");
+    }
+    for key in ["directional", "point", "spot"] {
+        assert_eq!(json["lights"][key], 1, "the demo has one {key} light");
+    }
+    assert!(json["bounds"]["min"].is_array() && json["bounds"]["max"].is_array());
+    let plain = hybrid(&["inspect", scenes().join("demo.toml").to_str().unwrap()]);
+    assert!(plain.status.success());
+}
