@@ -84,15 +84,21 @@ pub fn write_mask(object_id: &[u32], selected: &[bool], mask: &mut [f32]) {
     let values: Vec<f32> = selected.iter().map(|&on| if on { 1.0 } else { 0.0 }).chain([0.0]).collect();
     let last = selected.len();
     let value = |id: u32| values[(id as usize).min(last)];
-    for (ids, out) in object_id[..n].chunks(CHUNK).zip(mask[..n].chunks_mut(CHUNK)) {
-        // Fast path: one object covers the whole chunk, so one lookup fills it.
+    let mut id_chunks = object_id[..n].chunks_exact(CHUNK);
+    let mut mask_chunks = mask[..n].chunks_exact_mut(CHUNK);
+    for (ids, out) in (&mut id_chunks).zip(&mut mask_chunks) {
+        // Fast path: one object covers the whole chunk, so one lookup fills it (fixed-size
+        // copy: a few vector stores, no call to memset).
         if all_equal(ids, ids[0]) {
-            out.fill(value(ids[0]));
+            out.copy_from_slice(&[value(ids[0]); CHUNK]);
         } else {
             for (m, &id) in out.iter_mut().zip(ids) {
                 *m = value(id);
             }
         }
+    }
+    for (m, &id) in mask_chunks.into_remainder().iter_mut().zip(id_chunks.remainder()) {
+        *m = value(id);
     }
 }
 
