@@ -95,17 +95,21 @@ impl Texture {
     pub fn sample_bilinear(&self, uv: Vec2, level: usize) -> Vec4 {
         let level = level.min(self.levels.len() - 1);
         let l = &self.levels[level];
-        let (w, h) = (l.width as f32, l.height as f32);
-        let x = uv.x * w - 0.5;
-        let y = uv.y * h - 0.5;
-        if !x.is_finite() || !y.is_finite() {
+        if !uv.x.is_finite() || !uv.y.is_finite() {
             return self.texel(level, 0, 0);
         }
+        // Repeat addressing: keep only the fractional part (cheap), then integer wrap of the
+        // neighbour texel.
+        let x = (uv.x - uv.x.floor()) * l.width as f32 - 0.5;
+        let y = (uv.y - uv.y.floor()) * l.height as f32 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
-        let wrap = |v: f32, n: u32| -> u32 { (v.rem_euclid(n as f32) as u32).min(n - 1) };
-        let (ix0, iy0) = (wrap(x0, l.width), wrap(y0, l.height));
-        let (ix1, iy1) = (wrap(x0 + 1.0, l.width), wrap(y0 + 1.0, l.height));
+        let wrap = |i: i64, n: u32| -> u32 {
+            let n = n as i64;
+            (if i < 0 { i + n } else if i >= n { i - n } else { i }).clamp(0, n - 1) as u32
+        };
+        let (ix0, iy0) = (wrap(x0 as i64, l.width), wrap(y0 as i64, l.height));
+        let (ix1, iy1) = (wrap(x0 as i64 + 1, l.width), wrap(y0 as i64 + 1, l.height));
         let a = self.texel(level, ix0, iy0).lerp(self.texel(level, ix1, iy0), fx);
         let b = self.texel(level, ix0, iy1).lerp(self.texel(level, ix1, iy1), fx);
         a.lerp(b, fy)
@@ -192,6 +196,10 @@ mod tests {
         assert!((t.sample_bilinear(Vec2::new(0.5, 0.5), 0).x - 0.5).abs() < 1e-6);
         // Repeat addressing: 1.25 is the same as 0.25.
         assert!((t.sample_bilinear(Vec2::new(1.25, 0.5), 0).x - 0.0).abs() < 1e-6);
+        assert!((t.sample_bilinear(Vec2::new(-0.75, 0.5), 0).x - 0.0).abs() < 1e-6);
+        assert!((t.sample_bilinear(Vec2::new(-3.25, 0.5), 0).x - 1.0).abs() < 1e-6);
+        // Between the last and the first texel (wraps around the edge).
+        assert!((t.sample_bilinear(Vec2::new(0.0, 0.5), 0).x - 0.5).abs() < 1e-6);
         assert!(t.sample(Vec2::new(f32::NAN, 0.0), 0.0).is_finite());
     }
 }
