@@ -407,9 +407,62 @@ fn merge_bins(mut a: [[Bin; BINS]; 3], b: [[Bin; BINS]; 3]) -> [[Bin; BINS]; 3] 
 /// the depth stays ≤ log2(n) + a few and below the traversal stack.
 fn build_node(items: &mut [Item], base: usize, cb: Bounds, r: f32, depth: u32) -> Subtree {
     let n = items.len();
-    if n <= LEAF_MAX {
-        return Subtree { nodes: Vec::new(), root: LEAF | ((base as u32) << 4) | n as u32 };
+    if n < PARALLEL_MIN {
+        // Small subtrees are built serially straight into one vector (no stitching copies).
+        let mut nodes = Vec::with_capacity(n / 2);
+        let root = build_serial(items, base, cb, r, depth, &mut nodes);
+        return Subtree { nodes, root };
     }
+    let (mid, lb, rb) = split_items(items, cb, r, depth);
+    let (left_items, right_items) = items.split_at_mut(mid);
+    let (left, right) =
+        rayon::join(|| build_node(left_items, base, lb, r, depth + 1), || build_node(right_items, base + mid, rb, r, depth + 1));
+    // Stitch: this node, then the left subtree, then the right one (depth-first order).
+    let mut nodes = Vec::with_capacity(1 + left.nodes.len() + right.nodes.len());
+    let left_off = 1u32;
+    let right_off = 1 + left.nodes.len() as u32;
+    let fix = |c: u32, off: u32| if c & LEAF != 0 { c } else { c + off };
+    nodes.push(make_node(lb, rb, r, fix(left.root, left_off), fix(right.root, right_off)));
+    append_offset(&mut nodes, left.nodes, left_off);
+    append_offset(&mut nodes, right.nodes, right_off);
+    Subtree { nodes, root: 0 }
+}
+
+/// Serial build of the subtree over `items` into `nodes` (depth-first); returns its reference.
+fn build_serial(items: &mut [Item], base: usize, cb: Bounds, r: f32, depth: u32, nodes: &mut Vec<Node>) -> u32 {
+    let n = items.len();
+    if n <= LEAF_MAX {
+        return LEAF | ((base as u32) << 4) | n as u32;
+    }
+    let (mid, lb, rb) = split_items(items, cb, r, depth);
+    let (left_items, right_items) = items.split_at_mut(mid);
+    let idx = nodes.len();
+    nodes.push(make_node(lb, rb, r, 0, 0));
+    let left = build_serial(left_items, base, lb, r, depth + 1, nodes);
+    let right = build_serial(right_items, base + mid, rb, r, depth + 1, nodes);
+    nodes[idx].child = [left, right];
+    idx as u32
+}
+
+fn make_node(lb: Bounds, rb: Bounds, r: f32, left: u32, right: u32) -> Node {
+    let rr = Vec3::splat(r);
+    let (l0, l1) = (lb.min - rr, lb.max + rr);
+    let (r0, r1) = (rb.min - rr, rb.max + rr);
+    Node {
+        min_x: [l0.x, r0.x],
+        min_y: [l0.y, r0.y],
+        min_z: [l0.z, r0.z],
+        max_x: [l1.x, r1.x],
+        max_y: [l1.y, r1.y],
+        max_z: [l1.z, r1.z],
+        child: [left, right],
+    }
+}
+
+/// Chooses the split of `items` (> `LEAF_MAX` of them, centre bounds `cb`), partitions them in
+/// place and returns the left count and both sides' centre bounds.
+fn split_items(items: &mut [Item], cb: Bounds, r: f32, depth: u32) -> (usize, Bounds, Bounds) {
+    let n = items.len();
     let extent = cb.max - cb.min;
     let mut split = None;
     // Past depth 64 (pathological distributions) halve by count, which bounds the depth.
@@ -473,32 +526,7 @@ fn build_node(items: &mut [Item], base: usize, cb: Bounds, r: f32, depth: u32) -
             (mid, Bounds::of(&items[..mid]), Bounds::of(&items[mid..]))
         }
     };
-    let (left_items, right_items) = items.split_at_mut(mid);
-    let (left, right) = if n >= PARALLEL_MIN {
-        rayon::join(|| build_node(left_items, base, lb, r, depth + 1), || build_node(right_items, base + mid, rb, r, depth + 1))
-    } else {
-        (build_node(left_items, base, lb, r, depth + 1), build_node(right_items, base + mid, rb, r, depth + 1))
-    };
-    // Stitch: this node, then the left subtree, then the right one (depth-first order).
-    let mut nodes = Vec::with_capacity(1 + left.nodes.len() + right.nodes.len());
-    let rr = Vec3::splat(r);
-    let (l0, l1) = (lb.min - rr, lb.max + rr);
-    let (r0, r1) = (rb.min - rr, rb.max + rr);
-    let left_off = 1u32;
-    let right_off = 1 + left.nodes.len() as u32;
-    let fix = |c: u32, off: u32| if c & LEAF != 0 { c } else { c + off };
-    nodes.push(Node {
-        min_x: [l0.x, r0.x],
-        min_y: [l0.y, r0.y],
-        min_z: [l0.z, r0.z],
-        max_x: [l1.x, r1.x],
-        max_y: [l1.y, r1.y],
-        max_z: [l1.z, r1.z],
-        child: [fix(left.root, left_off), fix(right.root, right_off)],
-    });
-    append_offset(&mut nodes, left.nodes, left_off);
-    append_offset(&mut nodes, right.nodes, right_off);
-    Subtree { nodes, root: 0 }
+    (mid, lb, rb)
 }
 
 fn append_offset(dst: &mut Vec<Node>, src: Vec<Node>, off: u32) {
