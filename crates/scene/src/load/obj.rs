@@ -482,6 +482,35 @@ mod tests {
     use super::*;
 
     #[test]
+    fn missing_mtl_and_texture_are_warnings_with_the_default_material() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = dir.path().join("quad.OBJ");
+        std::fs::write(
+            &obj,
+            "mtllib nowhere.mtl\nusemtl stone\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n",
+        )
+        .unwrap();
+        let (mut mats, mut texs) = (vec![Material::default()], Vec::new());
+        let meshes = super::super::load_model(&obj, &mut mats, &mut texs).unwrap();
+        assert_eq!(meshes.len(), 1);
+        assert_eq!(meshes[0].indices.len(), 2);
+        assert_eq!(meshes[0].material, 1);
+        assert_eq!(mats.len(), 2);
+        assert_eq!(meshes[0].uvs[2], Vec2::new(1.0, 0.0)); // v flipped
+
+        let mtl = dir.path().join("m.mtl");
+        std::fs::write(&mtl, "newmtl stone\nKd 0.5 0.5 0.5\nKs 0.25\nmap_Kd missing.png\n").unwrap();
+        std::fs::write(&obj, "mtllib m.mtl\nusemtl stone\nv 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n").unwrap();
+        let (mut mats, mut texs) = (Vec::new(), Vec::new());
+        let meshes = super::super::load_model(&obj, &mut mats, &mut texs).unwrap();
+        assert_eq!(mats.len(), 1, "no default needed");
+        assert_eq!(mats[meshes[0].material].name, "stone");
+        assert_eq!(mats[0].specular, Vec3::splat(0.25)); // `Ks 0.25` completed, not a tobj panic
+        assert_eq!(mats[0].diffuse_map, None);
+        assert!(texs.is_empty());
+    }
+
+    #[test]
     fn map_options_set_tiling_and_offset() {
         let m = parse_map("-bm 0.5 -s 2 3 1 -o 0.25 0.5 textures\\my file.png", Path::new("/x"));
         assert_eq!(m.file, PathBuf::from("/x/textures/my file.png"));
