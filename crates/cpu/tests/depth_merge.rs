@@ -4,8 +4,11 @@
 
 use std::path::Path;
 
-use hybrid_core::{FrameSettings, Mode, RT_SCENE_OBJECT};
+use hybrid_core::{FrameSettings, Mode, NO_OBJECT, RT_SCENE_OBJECT};
+use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::frame::{CpuRenderer, Frame};
+use hybrid_cpu::spheres::SphereBvh;
+use hybrid_cpu::trace::PrimaryRays;
 use hybrid_scene::load_scene;
 
 fn tree_scene() -> hybrid_scene::Scene {
@@ -22,6 +25,12 @@ fn merged_frame_matches_rt_only_except_at_silhouettes() {
     let scene = tree_scene();
     let mut renderer = CpuRenderer::new(&scene).unwrap();
     let (w, h) = (200, 112);
+    // An independent reference for visibility: per pixel, the nearer of the closest triangle
+    // and the closest sphere along the same primary ray, compared by ray parameter t (no depth
+    // synthesis, packing or depth test involved).
+    let triangles = SceneBvh::build(renderer.prepared());
+    let cloud = &scene.point_clouds[0];
+    let spheres = SphereBvh::build(&cloud.points, cloud.radius).unwrap();
     for time in [0.0, 10.0] {
         let camera = scene.camera_path.as_ref().unwrap().camera_at(&scene.camera, time);
         let merged = renderer.render(&camera, FrameSettings { width: w, height: h, mode: Mode::All }, &mut |_| {});
@@ -31,6 +40,30 @@ fn merged_frame_matches_rt_only_except_at_silhouettes() {
         assert!(rt_pixels > (w * h) as usize / 20, "t={time}: only {rt_pixels} RT-scene pixels");
         let packed_hits = merged.rt_packed.as_ref().unwrap().texels.iter().filter(|t| t[0] != 0 || t[1] != 0).count();
         assert!(packed_hits > rt_pixels, "t={time}: polygons should hide some spheres ({packed_hits} hits, {rt_pixels} shown)");
+
+        let rays = PrimaryRays::new(&camera, w, h);
+        let mut visibility_mismatch = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let (o, d, t_max) = rays.ray(x, y);
+                let tri = triangles.closest_hit(o, d, 0.0, t_max).map(|hit| hit.t);
+                let sph = spheres.closest_hit(o, d, 0.0, t_max).map(|(t, _)| t);
+                let expected = match (tri, sph) {
+                    (_, Some(ts)) if tri.is_none_or(|tt| ts < tt) => RT_SCENE_OBJECT,
+                    (Some(_), _) => 0,
+                    _ => NO_OBJECT,
+                };
+                let got = match merged.gbuffer.object_id[(y * w + x) as usize] {
+                    RT_SCENE_OBJECT => RT_SCENE_OBJECT,
+                    NO_OBJECT => NO_OBJECT,
+                    _ => 0,
+                };
+                visibility_mismatch += (got != expected) as usize;
+            }
+        }
+        let share = visibility_mismatch as f64 / (w * h) as f64;
+        eprintln!("t={time}: {visibility_mismatch} pixels disagree with ray-parameter visibility");
+        assert!(share <= 0.005, "t={time}: {:.3}% of pixels show the wrong layer (sphere vs polygon)", share * 100.0);
 
         let a = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(&reference));
         let b = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(&merged));
