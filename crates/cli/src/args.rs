@@ -22,6 +22,8 @@ pub enum Command {
     Render(RenderArgs),
     /// Load and validate a scene and print its statistics (the paper's Table 4 row).
     Inspect(InspectArgs),
+    /// The paper's experiments (Tables 5 and 6) on one scene, with image error (FLIP) against rt-only.
+    Bench(BenchArgs),
 }
 
 #[derive(Debug, Args)]
@@ -64,6 +66,11 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Beyond paper 2: trace the point-cloud capsule after the raster, clipping its rays at the
+    /// polygons' depth. Saves the rays that would end behind polygons, at the cost of running
+    /// the capsule after (not beside) the raster.
+    #[arg(long)]
+    pub clip_capsule: bool,
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,
@@ -76,6 +83,54 @@ pub struct InspectArgs {
     /// Print machine-readable JSON instead of the table row.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// Scene file (TOML).
+    pub scene: PathBuf,
+    /// Image size as WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Rendering backend.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    /// Static set: frames measured at the scene's camera (after 2 warm-up frames).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..))]
+    pub frames: u32,
+    /// Path set: seconds of the camera path to render (default: 20, or the whole path if shorter).
+    #[arg(long)]
+    pub path_seconds: Option<f32>,
+    /// Path set: frames per second of path time.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
+    /// Modes to measure, comma-separated (hybrid, all, rt-only, raster).
+    #[arg(long, value_delimiter = ',', default_value = "hybrid,all,rt-only", value_parser = parse_mode)]
+    pub modes: Vec<Mode>,
+    /// Output folder (bench.json, frames.csv, frame_times.png, sweep.csv, sweep.png).
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    /// Path set: FLIP against rt-only on every K-th frame.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
+    pub flip_every: u32,
+    /// Also render the path at several cost budgets with both policies (FLIP vs time).
+    #[arg(long)]
+    pub sweep_budget: bool,
+    /// Heuristic budget in cost units (overrides the scene).
+    #[arg(long, conflicts_with = "budget_ms")]
+    pub budget: Option<f64>,
+    /// Heuristic budget in milliseconds of trace time (overrides the scene).
+    #[arg(long)]
+    pub budget_ms: Option<f64>,
+    /// Heuristic selection policy (overrides the scene).
+    #[arg(long, value_enum)]
+    pub policy: Option<PolicyChoice>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// No progress lines on stderr.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

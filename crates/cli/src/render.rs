@@ -87,6 +87,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
         CliError::bad_input(format!("{file}: {e}"))
     })?;
+    renderer.clip_capsule_at_raster_depth = args.clip_capsule;
     let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage));
     progress.finish();
 

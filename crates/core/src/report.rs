@@ -10,7 +10,9 @@ use crate::frame::Mode;
 pub struct StageTimings {
     /// Stage 0: the RT-scene capsule (trace + pack) and its unpack; 0 without point clouds.
     pub capsule: f64,
+    /// Stage 1: G-buffer fill and deferred lighting (`lighting` is the deferred-lighting part).
     pub raster: f64,
+    pub lighting: f64,
     pub heuristic: f64,
     pub trace: f64,
     pub blend: f64,

@@ -64,11 +64,28 @@ impl<'s> CpuRenderer<'s> {
         let mut t = StageTimings::default();
         let mode = settings.mode;
 
-        on_stage("capsule");
-        let (rt_packed, rt_layer, capsule_report) = timed(&mut t.capsule, || self.capsule_stage(camera, settings, None));
-
-        on_stage("raster");
-        let (mut gbuffer, lighting, primary_rays) = timed(&mut t.raster, || self.raster_stage(camera, settings, rt_layer.as_ref()));
+        let (mut gbuffer, lighting, primary_rays, rt_packed, capsule_report) = if self.clip_capsule_at_raster_depth {
+            // Beyond paper 2: raster first, then the capsule with rays clipped at the polygons.
+            on_stage("raster");
+            let (mut gbuffer, primary_rays) = timed(&mut t.raster, || self.geometry_stage(camera, settings, None));
+            on_stage("capsule");
+            let (rt_packed, rt_layer, capsule_report) =
+                timed(&mut t.capsule, || self.capsule_stage(camera, settings, Some(&gbuffer.depth)));
+            if let Some(layer) = &rt_layer {
+                raster::merge_rt_layer(&mut gbuffer, layer, camera);
+            }
+            let lighting = timed(&mut t.lighting, || lighting::deferred_lighting(&gbuffer, self.scene, camera));
+            (gbuffer, lighting, primary_rays, rt_packed, capsule_report)
+        } else {
+            // Paper 2: the capsule's frame first, merged by depth as the polygons are drawn.
+            on_stage("capsule");
+            let (rt_packed, rt_layer, capsule_report) = timed(&mut t.capsule, || self.capsule_stage(camera, settings, None));
+            on_stage("raster");
+            let (gbuffer, primary_rays) = timed(&mut t.raster, || self.geometry_stage(camera, settings, rt_layer.as_ref()));
+            let lighting = timed(&mut t.lighting, || lighting::deferred_lighting(&gbuffer, self.scene, camera));
+            (gbuffer, lighting, primary_rays, rt_packed, capsule_report)
+        };
+        t.raster += t.lighting;
 
         on_stage("heuristic");
         let heuristic_report = timed(&mut t.heuristic, || self.heuristic_stage(&mut gbuffer, camera, mode));
@@ -137,22 +154,20 @@ impl<'s> CpuRenderer<'s> {
         (Some(packed), Some(layer), Some(report))
     }
 
-    /// Stage 1: the G-buffer (raster, or primary rays in rt-only mode) merged by depth with the
-    /// RT layer, then deferred lighting into the P-buffer. Returns the primary-ray count.
-    fn raster_stage(&self, camera: &Camera, settings: FrameSettings, rt_layer: Option<&RtLayer>) -> (GBuffer, Vec<Vec3>, u64) {
+    /// Stage 1 (geometry): the G-buffer — rasterized, or from primary rays in rt-only mode —
+    /// merged by depth with the RT layer. Returns the primary-ray count. Deferred lighting into
+    /// the P-buffer follows (`lighting::deferred_lighting`).
+    fn geometry_stage(&self, camera: &Camera, settings: FrameSettings, rt_layer: Option<&RtLayer>) -> (GBuffer, u64) {
         let (w, h) = (settings.width, settings.height);
-        let (gbuffer, primary) = if settings.mode == Mode::RtOnly {
+        if settings.mode == Mode::RtOnly {
             let mut g = trace::rt_only_gbuffer(&self.prepared, &self.bvh, camera, w, h);
-            let primary = trace::primary_ray_count(w, h);
             if let Some(layer) = rt_layer {
                 raster::merge_rt_layer(&mut g, layer, camera);
             }
-            (g, primary)
+            (g, trace::primary_ray_count(w, h))
         } else {
             (raster::rasterize(&self.prepared, camera, w, h, rt_layer), 0)
-        };
-        let lighting = lighting::deferred_lighting(&gbuffer, self.scene, camera);
-        (gbuffer, lighting, primary)
+        }
     }
 
     /// Stage 2: A per object from the object-id target (one pass), the heuristic's selection,

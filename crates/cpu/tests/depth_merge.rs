@@ -74,3 +74,20 @@ fn merged_frame_matches_rt_only_except_at_silhouettes() {
         assert!(share <= 0.005, "t={time}: {:.3}% of pixels differ by FLIP > 0.1 (limit 0.5%)", share * 100.0);
     }
 }
+
+#[test]
+fn clipping_capsule_rays_at_the_raster_depth_changes_nothing_visible() {
+    let scene = tree_scene();
+    let mut renderer = CpuRenderer::new(&scene).unwrap();
+    let settings = FrameSettings { width: 160, height: 90, mode: Mode::All };
+    let camera = scene.camera_path.as_ref().unwrap().camera_at(&scene.camera, 10.0);
+    let unclipped = renderer.render(&camera, settings, &mut |_| {});
+    renderer.clip_capsule_at_raster_depth = true;
+    let clipped = renderer.render(&camera, settings, &mut |_| {});
+    assert_eq!(unclipped.gbuffer.object_id, clipped.gbuffer.object_id);
+    assert_eq!(unclipped.gbuffer.depth, clipped.gbuffer.depth);
+    assert_eq!(unclipped.buffers.final_srgb, clipped.buffers.final_srgb);
+    // Behind polygons the clipped capsule reports misses where the unclipped one hit.
+    let hits = |f: &Frame| f.rt_packed.as_ref().unwrap().texels.iter().filter(|t| t[0] != 0 || t[1] != 0).count();
+    assert!(hits(&clipped) < hits(&unclipped), "{} vs {}", hits(&clipped), hits(&unclipped));
+}
