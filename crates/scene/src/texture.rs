@@ -106,7 +106,14 @@ impl Texture {
         let (fx, fy) = (x - x0, y - y0);
         let wrap = |i: i64, n: u32| -> u32 {
             let n = n as i64;
-            (if i < 0 { i + n } else if i >= n { i - n } else { i }).clamp(0, n - 1) as u32
+            (if i < 0 {
+                i + n
+            } else if i >= n {
+                i - n
+            } else {
+                i
+            })
+            .clamp(0, n - 1) as u32
         };
         let (ix0, iy0) = (wrap(x0 as i64, l.width), wrap(y0 as i64, l.height));
         let (ix1, iy1) = (wrap(x0 as i64 + 1, l.width), wrap(y0 as i64 + 1, l.height));
