@@ -459,3 +459,35 @@ fn ply_issue623_vertex_list_without_faces_loads_as_points() {
     assert!(c.is_empty());
     assert_eq!(p[0], glam::Vec3::new(7.941797, 1.432409, -0.927566));
 }
+
+// ---------------------------------------------------------------------------------------------
+// Truncation sweep: every prefix of small valid files loads or fails cleanly (never panics), and
+// a failure names the file.
+
+fn truncation_sweep(rel: &str, step: usize, point_cloud: bool) {
+    let bytes = std::fs::read(asset(rel)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let name = Path::new(rel).file_name().unwrap();
+    let path = dir.path().join(name);
+    for cut in (0..bytes.len()).step_by(step) {
+        std::fs::write(&path, &bytes[..cut]).unwrap();
+        let result = if point_cloud {
+            load_point_cloud(&path).map(|(p, _)| p.len())
+        } else {
+            let (mut m, mut t) = (Vec::new(), Vec::new());
+            load_model(&path, &mut m, &mut t).map(|meshes| meshes.len())
+        };
+        if let Err(e) = result {
+            assert!(e.to_string().contains(&*name.to_string_lossy()), "{rel} cut at {cut}: {e}");
+        }
+    }
+}
+
+#[test]
+fn truncated_prefixes_never_panic() {
+    truncation_sweep("broken-models/ply/cube_binary.ply", 1, false);
+    truncation_sweep("broken-models/ply/points.ply", 1, true);
+    truncation_sweep("broken-models/obj/box_without_lineending.obj", 1, false);
+    truncation_sweep("broken-models/gltf/control-valid-BoxTextured/BoxTextured.glb", 7, false);
+    truncation_sweep("broken-models/ply/issue623.ply", 5, false);
+}
