@@ -14,7 +14,7 @@
 //!   the squared distance of the centre from the ray with r². Ties in t go to the lower index, so
 //!   the result equals brute force whatever the traversal order.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4, Vec4Swizzles};
 
 /// Spheres per leaf at most.
 const LEAF_MAX: usize = 4;
@@ -39,16 +39,14 @@ impl Default for TraversalStack {
 /// Largest number of spheres (leaf starts have 27 bits).
 pub const MAX_SPHERES: usize = 1 << 27;
 
-/// One inner node: the boxes of its two children (structure of arrays: index 0 = left, 1 = right)
-/// and their references (an inner-node index, or `LEAF | start << 4 | count`).
+/// One inner node: the boxes of its two children, one 4-lane vector per axis
+/// `(min left, min right, max left, max right)` so both slab tests run as a few SIMD operations,
+/// and the children's references (an inner-node index, or `LEAF | start << 4 | count`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Node {
-    min_x: [f32; 2],
-    min_y: [f32; 2],
-    min_z: [f32; 2],
-    max_x: [f32; 2],
-    max_y: [f32; 2],
-    max_z: [f32; 2],
+    x: Vec4,
+    y: Vec4,
+    z: Vec4,
     child: [u32; 2],
 }
 
@@ -248,8 +246,7 @@ impl SphereBvh {
                 }
             } else {
                 let n = &self.nodes[cur as usize];
-                let (e0, x0) = ray.slab(Vec3::new(n.min_x[0], n.min_y[0], n.min_z[0]), Vec3::new(n.max_x[0], n.max_y[0], n.max_z[0]));
-                let (e1, x1) = ray.slab(Vec3::new(n.min_x[1], n.min_y[1], n.min_z[1]), Vec3::new(n.max_x[1], n.max_y[1], n.max_z[1]));
+                let (e0, x0, e1, x1) = ray.slab2(n, best_t);
                 let h0 = e0 <= x0 && e0 <= best_t;
                 let h1 = e1 <= x1 && e1 <= best_t;
                 match (h0, h1) {
@@ -337,7 +334,30 @@ struct Ray {
 impl Ray {
     #[inline]
     fn new(o: Vec3, d: Vec3, t_min: f32, t_max: f32, r: f32) -> Self {
-        Self { o, d, inv: d.recip(), t_min, t_max, r }
+        // A finite stand-in for 1/0 keeps 0·(1/d) from becoming NaN when the origin lies on a slab plane.
+        let safe = |c: f32| if c.abs() < 1e-30 { 1e30f32.copysign(c) } else { 1.0 / c };
+        let inv = Vec3::new(safe(d.x), safe(d.y), safe(d.z));
+        Self { o, d, inv, t_min, t_max, r }
+    }
+
+    /// Both children's slab tests at once: (entry, exit) of the left box, then of the right one,
+    /// clipped to `[t_min, limit]` and padded like [`Ray::slab`].
+    #[inline]
+    fn slab2(&self, n: &Node, limit: f32) -> (f32, f32, f32, f32) {
+        // Lanes (min l, min r, max l, max r) → t; for a negative direction the max planes are
+        // entered first, so swap the halves to get (near l, near r, far l, far r).
+        let axis = |v: Vec4, o: f32, inv: f32| {
+            let t = (v - Vec4::splat(o)) * inv;
+            if inv < 0.0 { t.zwxy() } else { t }
+        };
+        let tx = axis(n.x, self.o.x, self.inv.x);
+        let ty = axis(n.y, self.o.y, self.inv.y);
+        let tz = axis(n.z, self.o.z, self.inv.z);
+        let near = tx.max(ty).max(tz).max(Vec4::splat(self.t_min));
+        let far = tx.min(ty).min(tz).min(Vec4::splat(limit));
+        let e = near - near.abs() * 1e-5;
+        let x = far + far.abs() * 1e-5;
+        (e.x, x.z, e.y, x.w)
     }
 
     /// Entry and exit parameters of the box (entry > exit: miss), clipped to `[t_min, t_max]`.
@@ -449,12 +469,9 @@ fn make_node(lb: Bounds, rb: Bounds, r: f32, left: u32, right: u32) -> Node {
     let (l0, l1) = (lb.min - rr, lb.max + rr);
     let (r0, r1) = (rb.min - rr, rb.max + rr);
     Node {
-        min_x: [l0.x, r0.x],
-        min_y: [l0.y, r0.y],
-        min_z: [l0.z, r0.z],
-        max_x: [l1.x, r1.x],
-        max_y: [l1.y, r1.y],
-        max_z: [l1.z, r1.z],
+        x: Vec4::new(l0.x, r0.x, l1.x, r1.x),
+        y: Vec4::new(l0.y, r0.y, l1.y, r1.y),
+        z: Vec4::new(l0.z, r0.z, l1.z, r1.z),
         child: [left, right],
     }
 }
