@@ -3,10 +3,12 @@
 //! ```text
 //! hybrid render [SCENE] [-o out.png] [--size WxH] [--mode M] [--backend B] [--dump DIR] [--report FILE.json] [--time S]
 //! hybrid inspect SCENE [--json]
+//! hybrid bench SCENE [--size WxH] [--frames N] [--path-seconds S] [--fps F] [--modes M,..] [--out DIR] [--flip-every K] [--sweep-budget]
 //! ```
 //! Bad input (scene files, models, flags) prints one clear error and exits with code 2.
 
 mod args;
+mod bench;
 mod dump;
 mod inspect;
 mod output;
@@ -56,6 +58,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Inspect(a) => inspect::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
