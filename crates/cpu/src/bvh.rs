@@ -1,22 +1,30 @@
 //! `bvh`: the scene's triangle BVH for the trace stage (DESIGN §1, "PreparedScene … BVHs").
 //!
-//! Our own BVH rather than obvhs: a binned-SAH binary build (16 bins on all three axes, the
-//! upper levels split in parallel with `rayon::join`), collapsed into a 4-wide BVH whose four
-//! child boxes are tested at once with 4-lane SIMD (glam `Vec4`), as Embree's BVH4 does.
-//! Traversal is tuned for the two ray kinds of paper 1:
+//! Our own BVH rather than obvhs: a binned-SAH binary build (16 bins on all three axes; large
+//! nodes are binned in parallel, and the upper levels split in parallel with `rayon::join`),
+//! collapsed into a 4-wide BVH whose four child boxes are tested at once with 4-lane SIMD (glam
+//! `Vec4`), as Embree's BVH4 does. Traversal is tuned for the two ray kinds of paper 1:
 //! - `closest_hit`: ordered traversal (hit children sorted by entry distance, nearest first);
 //!   stacked entries farther than the closest hit so far are skipped;
 //! - `any_hit_attenuation` (listing 8b): unordered traversal that visits every triangle on the
-//!   segment once and stops as soon as the attenuation reaches 0 (an opaque blocker);
-//!   triangles whose material casts no shadows are skipped before the triangle test.
+//!   segment once and stops as soon as the attenuation reaches 0. Which triangles matter to
+//!   shadow rays is precomputed per triangle: materials that cast no shadows (or are fully
+//!   transparent) are skipped before any shading; an opaque material (opacity 1 and no texture
+//!   that can lower it: no diffuse-map alpha < 1, no optical map with blue < 1) ends the ray at
+//!   once; only materials whose opacity varies over a texture are evaluated with `surface_at`.
 //!
 //! Leaves hold their triangles in packs of four as precomputed Möller–Trumbore data (`v0`, `e1`,
-//! `e2`, SoA), tested together with 4-lane SIMD; the SAH counts leaf cost in packs.
+//! `e2`, SoA), tested together with 4-lane SIMD; the SAH counts leaf cost in packs. A leaf is
+//! referenced straight from its parent's child slot (first pack and pack count packed into the
+//! `u32`), and everything a hit needs (triangle, shadow class) is indexed by its pack slot
+//! (`pack · 4 + lane`), so no indirection table sits between a hit and its triangle.
 //!
-//! The build is deterministic (same tree for any thread count): the parallel halves build into
-//! separate subtrees that are collapsed in a fixed depth-first order.
+//! The build is deterministic (same tree for any thread count): parallel binning merges exact
+//! min/max/count partials, and the parallel halves build into separate subtrees that are
+//! collapsed in a fixed depth-first order.
 
 use glam::{IVec3, Vec3, Vec3A, Vec4};
+use hybrid_scene::{Material, Texture};
 use rayon::prelude::*;
 
 use crate::prepare::{PreparedScene, TriangleRef};
@@ -33,7 +41,8 @@ pub struct Hit {
 
 /// A 4-wide node (SoA child boxes, tested together with 4-lane SIMD): `lo[axis]`/`hi[axis]`
 /// hold the four children's box minima/maxima on that axis. `child[k]` is an inner node index,
-/// `LEAF | leaf index`, or [`EMPTY_SLOT`] (its box is empty, so no ray enters it).
+/// a leaf reference (`LEAF | first pack << LEAF_PACK_BITS | (packs − 1)`), or [`EMPTY_SLOT`]
+/// (its box is empty, so no ray enters it).
 #[derive(Debug, Clone, Copy)]
 #[repr(C, align(64))]
 struct Node4 {
@@ -43,7 +52,18 @@ struct Node4 {
 }
 
 const LEAF: u32 = 1 << 31;
+/// Low bits of a leaf reference that hold its pack count − 1.
+const LEAF_PACK_BITS: u32 = 4;
+/// Most packs one leaf reference can name; larger leaves are split under an extra node.
+const MAX_LEAF_PACKS: usize = 1 << LEAF_PACK_BITS;
 const EMPTY_SLOT: u32 = u32::MAX;
+
+/// The packs of a leaf reference.
+#[inline(always)]
+fn leaf_packs(c: u32) -> std::ops::Range<usize> {
+    let first = ((c & !LEAF) >> LEAF_PACK_BITS) as usize;
+    first..first + (c & (MAX_LEAF_PACKS as u32 - 1)) as usize + 1
+}
 
 impl Node4 {
     const EMPTY: Node4 = Node4 { lo: [Vec4::INFINITY; 3], hi: [Vec4::NEG_INFINITY; 3], child: [EMPTY_SLOT; 4] };
@@ -101,12 +121,15 @@ struct Tri4 {
     e2: [Vec4; 3],
 }
 
-/// Leaf-order triangle index of an unused pack lane.
-const NO_TRI: u32 = u32::MAX;
+impl Tri4 {
+    const EMPTY: Tri4 = Tri4 { v0: [Vec4::ZERO; 3], e1: [Vec4::ZERO; 3], e2: [Vec4::ZERO; 3] };
+}
 
-/// What a shadow ray does at a triangle (listing 8b), precomputed per triangle in leaf order.
-/// `IGNORE` (material casts no shadows) = transparency 1; constant opacity without maps =
-/// that transparency; `EVALUATE` = textured opacity, evaluated with `surface_at` at the hit.
+/// Triangle of an unused pack lane.
+const NO_TRI: TriangleRef = TriangleRef { mesh: u32::MAX, triangle: u32::MAX };
+
+/// Shadow transparency of a slot whose opacity varies over a texture: evaluated with
+/// `surface_at` at the hit.
 const EVALUATE: f32 = -1.0;
 
 /// Triangle BVH over every triangle of a [`PreparedScene`].
@@ -114,14 +137,16 @@ const EVALUATE: f32 = -1.0;
 pub struct SceneBvh {
     /// 4-wide nodes; the root is node 0 (when there are triangles).
     nodes: Vec<Node4>,
-    /// `[first, count]` of each leaf's run of packs in `packs`.
-    leaves: Vec<[u32; 2]>,
     packs: Vec<Tri4>,
-    /// Leaf-order triangle index of each pack lane (`pack · 4 + lane`), or [`NO_TRI`].
-    pack_tri: Vec<u32>,
-    refs: Vec<TriangleRef>,
-    /// Shadow-ray transparency per leaf-ordered triangle, or [`EVALUATE`].
-    shadow_transparency: Vec<f32>,
+    /// Per pack, for shadow rays: bits 0–3 = lanes that can block light (material casts
+    /// shadows, transparency < 1); bits 4–7 = lanes that block it fully (transparency 0).
+    pack_shadow: Vec<u8>,
+    /// Triangle of each pack slot (`pack · 4 + lane`); [`NO_TRI`] for unused lanes.
+    slot_ref: Vec<TriangleRef>,
+    /// Shadow-ray transparency of each pack slot (1 − opacity), or [`EVALUATE`].
+    slot_shadow: Vec<f32>,
+    triangles: usize,
+    leaves: usize,
 }
 
 const BINS: usize = 16;
@@ -129,10 +154,12 @@ const BINS: usize = 16;
 const MAX_LEAF: usize = 8;
 /// Nodes at this depth become leaves whatever their size, so traversal stacks stay bounded.
 const MAX_DEPTH: u32 = 56;
-/// Each 4-wide level pushes at most 3 entries.
-const STACK: usize = 3 * MAX_DEPTH as usize + 8;
+/// Each 4-wide level pushes at most 3 entries (a leaf split under extra nodes adds a few levels).
+const STACK: usize = 3 * MAX_DEPTH as usize + 32;
 /// Subtrees larger than this are split in parallel.
 const PARALLEL_MIN: usize = 8192;
+/// Nodes larger than this are binned in parallel (chunks of this size).
+const PARALLEL_BIN_MIN: usize = 32 * 1024;
 /// SAH: cost of a 4-wide node test relative to a 4-triangle test.
 const TRAVERSAL_COST: f32 = 1.0;
 const INTERSECT_COST: f32 = 0.6;
@@ -159,6 +186,39 @@ impl Bounds {
     fn half_area(&self) -> f32 {
         let d = (self.max - self.min).max(Vec3A::ZERO);
         d.x * d.y + d.y * d.z + d.z * d.x
+    }
+}
+
+/// Box and centroid box of a run of primitives.
+#[derive(Clone, Copy)]
+struct PrimBounds {
+    bounds: Bounds,
+    centroids: Bounds,
+}
+
+impl PrimBounds {
+    const EMPTY: Self = Self { bounds: Bounds::EMPTY, centroids: Bounds::EMPTY };
+    #[inline(always)]
+    fn add(&mut self, p: &Prim) {
+        self.bounds.grow(&p.bounds());
+        self.centroids.grow_point(p.centroid2());
+    }
+    fn merge(mut self, o: Self) -> Self {
+        self.bounds.grow(&o.bounds);
+        self.centroids.grow(&o.centroids);
+        self
+    }
+    fn of(prims: &[Prim]) -> Self {
+        let serial = |c: &[Prim]| {
+            let mut b = PrimBounds::EMPTY;
+            c.iter().for_each(|p| b.add(p));
+            b
+        };
+        if prims.len() >= PARALLEL_BIN_MIN {
+            prims.par_chunks(PARALLEL_BIN_MIN).map(serial).reduce(|| PrimBounds::EMPTY, PrimBounds::merge)
+        } else {
+            serial(prims)
+        }
     }
 }
 
@@ -192,6 +252,91 @@ impl Prim {
     }
 }
 
+/// Shadow-ray transparency of a material: 1 when it casts no shadows, its constant
+/// `1 − opacity` when no texture can change it (no maps, or maps whose relevant channel is the
+/// same in every texel of level 0, the level shadow rays sample), else [`EVALUATE`].
+fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
+    if !m.casts_shadows || m.opacity <= 0.0 {
+        return 1.0;
+    }
+    if !m.opacity.is_finite() {
+        return EVALUATE;
+    }
+    // The value of texture channel `c` if it is the same everywhere on level 0.
+    let constant = |id: Option<usize>, c: usize| -> Option<f32> {
+        let Some(id) = id else { return Some(1.0) };
+        let t = textures.get(id)?;
+        let texels = &t.levels.first()?.texels;
+        let v = texels.first()?[c];
+        texels.iter().all(|x| x[c] == v).then(|| t.texel(0, 0, 0)[c])
+    };
+    match (constant(m.diffuse_map, 3), constant(m.optical_map, 2)) {
+        (Some(a), Some(b)) => 1.0 - (m.opacity * a * b).clamp(0.0, 1.0),
+        _ => EVALUATE,
+    }
+}
+
+/// Builds leaf packs in depth-first leaf order during the collapse.
+struct Packer<'a> {
+    corners: &'a [[Vec3; 3]],
+    /// Triangle index of each primitive position after the build's partitioning.
+    order: &'a [u32],
+    packs: Vec<Tri4>,
+    /// Triangle index of each pack slot, `u32::MAX` for unused lanes.
+    slot_tri: Vec<u32>,
+    leaves: usize,
+}
+
+impl Packer<'_> {
+    /// Packs the triangles `first..first + count` (positions in `order`); returns the reference
+    /// to them: a leaf, or an extra node over up to four leaves when they need more than
+    /// [`MAX_LEAF_PACKS`] packs.
+    fn leaf(&mut self, first: u32, count: u32, nodes: &mut Vec<Node4>) -> u32 {
+        let n_packs = (count as usize).div_ceil(4);
+        if n_packs <= MAX_LEAF_PACKS {
+            let start = self.packs.len() as u32;
+            for chunk in (first..first + count).step_by(4) {
+                let mut p = Tri4::EMPTY;
+                for lane in 0..4 {
+                    let k = chunk + lane as u32;
+                    if k >= first + count {
+                        self.slot_tri.push(u32::MAX);
+                        continue;
+                    }
+                    let tri = self.order[k as usize];
+                    let [a, b, c] = self.corners[tri as usize];
+                    let (e1, e2) = (b - a, c - a);
+                    for axis in 0..3 {
+                        p.v0[axis][lane] = a[axis];
+                        p.e1[axis][lane] = e1[axis];
+                        p.e2[axis][lane] = e2[axis];
+                    }
+                    self.slot_tri.push(tri);
+                }
+                self.packs.push(p);
+            }
+            self.leaves += 1;
+            return LEAF | start << LEAF_PACK_BITS | (n_packs as u32 - 1);
+        }
+        // Triangles per part: a multiple of 4, at most four parts.
+        let part = (n_packs.div_ceil(4) * 4) as u32;
+        let idx = nodes.len();
+        nodes.push(Node4::EMPTY);
+        let mut node = Node4::EMPTY;
+        for (k, s) in (first..first + count).step_by(part as usize).enumerate() {
+            let c = part.min(first + count - s);
+            let mut b = Bounds::EMPTY;
+            for &tri in &self.order[s as usize..(s + c) as usize] {
+                self.corners[tri as usize].iter().for_each(|p| b.grow_point(Vec3A::from(*p)));
+            }
+            let r = self.leaf(s, c, nodes);
+            node.set(k, &b, r);
+        }
+        nodes[idx] = node;
+        idx as u32
+    }
+}
+
 impl SceneBvh {
     /// Builds the BVH over `prepared.triangles`.
     pub fn build(prepared: &PreparedScene) -> SceneBvh {
@@ -210,69 +355,71 @@ impl SceneBvh {
             })
             .collect();
 
-        let mut nodes = Vec::with_capacity(prims.len() / 4);
-        let mut leaves = Vec::with_capacity(prims.len() / 2);
-        if !prims.is_empty() {
-            let root = build_rec(&mut prims, 0, 0);
-            if let BuildNode::Leaf { bounds, .. } = &root {
-                // A single leaf: a root node with one child.
-                nodes.push(Node4::EMPTY);
-                let r = collapse(&root, &mut nodes, &mut leaves);
-                nodes[0].set(0, bounds, r);
-            } else {
-                collapse(&root, &mut nodes, &mut leaves);
-            }
-        }
+        let scene = prepared.scene;
+        let (root, material_shadow) = rayon::join(
+            || {
+                (!prims.is_empty()).then(|| {
+                    let pb = PrimBounds::of(&prims);
+                    build_rec(&mut prims, pb, 0, 0)
+                })
+            },
+            || scene.materials.par_iter().map(|m| material_shadow(m, &scene.textures)).collect::<Vec<f32>>(),
+        );
 
         let order: Vec<u32> = prims.iter().map(Prim::index).collect();
         drop(prims);
-        // Pack each leaf's triangles by four, in leaf (depth-first) order.
-        let mut packs = Vec::with_capacity(order.len() / 2);
-        let mut pack_tri = Vec::with_capacity(order.len() * 2);
-        for leaf in leaves.iter_mut() {
-            let [first, count] = *leaf;
-            let start = packs.len() as u32;
-            for chunk in (first..first + count).step_by(4) {
-                let mut p = Tri4 { v0: [Vec4::ZERO; 3], e1: [Vec4::ZERO; 3], e2: [Vec4::ZERO; 3] };
-                for lane in 0..4 {
-                    let k = chunk + lane as u32;
-                    if k >= first + count {
-                        pack_tri.push(NO_TRI);
-                        continue;
-                    }
-                    let [a, b, c] = corners[order[k as usize] as usize];
-                    let (e1, e2) = (b - a, c - a);
-                    for axis in 0..3 {
-                        p.v0[axis][lane] = a[axis];
-                        p.e1[axis][lane] = e1[axis];
-                        p.e2[axis][lane] = e2[axis];
-                    }
-                    pack_tri.push(k);
-                }
-                packs.push(p);
+        let mut nodes = Vec::with_capacity(order.len() / 8);
+        let mut packer = Packer {
+            corners: &corners,
+            order: &order,
+            packs: Vec::with_capacity(order.len() / 3),
+            slot_tri: Vec::with_capacity(order.len() * 4 / 3),
+            leaves: 0,
+        };
+        match &root {
+            None => {}
+            Some(BuildNode::Leaf { bounds, first, count }) => {
+                // A single leaf: a root node with one child.
+                nodes.push(Node4::EMPTY);
+                let r = packer.leaf(*first, *count, &mut nodes);
+                nodes[0].set(0, bounds, r);
             }
-            *leaf = [start, packs.len() as u32 - start];
+            Some(inner) => {
+                collapse(inner, &mut nodes, &mut packer);
+            }
         }
-        let refs: Vec<TriangleRef> = order.iter().map(|&i| prepared.triangles[i as usize]).collect();
-        let shadow_transparency = refs
+        drop(root);
+
+        let Packer { packs, slot_tri, leaves, .. } = packer;
+        let slot_ref: Vec<TriangleRef> =
+            slot_tri.iter().map(|&i| if i == u32::MAX { NO_TRI } else { prepared.triangles[i as usize] }).collect();
+        let slot_shadow: Vec<f32> = slot_ref
             .iter()
-            .map(|t| {
-                let m = prepared.material(*t);
-                if !m.casts_shadows {
-                    1.0
-                } else if m.diffuse_map.is_none() && m.optical_map.is_none() {
-                    1.0 - m.opacity.clamp(0.0, 1.0)
-                } else {
-                    EVALUATE
+            .map(
+                |t| if *t == NO_TRI { 1.0 } else { material_shadow.get(prepared.meshes[t.mesh as usize].material).copied().unwrap_or(1.0) },
+            )
+            .collect();
+        let pack_shadow = slot_shadow
+            .chunks_exact(4)
+            .map(|s| {
+                let mut bits = 0u8;
+                for (lane, &tr) in s.iter().enumerate() {
+                    if tr != 1.0 {
+                        bits |= 1 << lane;
+                    }
+                    if tr == 0.0 {
+                        bits |= 1 << (lane + 4);
+                    }
                 }
+                bits
             })
             .collect();
-        SceneBvh { nodes, leaves, packs, pack_tri, refs, shadow_transparency }
+        SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles: order.len(), leaves }
     }
 
     /// Number of triangles in the BVH.
     pub fn triangle_count(&self) -> usize {
-        self.refs.len()
+        self.triangles
     }
 
     /// Number of (4-wide) inner nodes.
@@ -282,19 +429,19 @@ impl SceneBvh {
 
     /// Number of leaves.
     pub fn leaf_count(&self) -> usize {
-        self.leaves.len()
+        self.leaves
     }
 
     /// The closest triangle hit with `t_min < t < t_max` along `origin + t·dir`.
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
-        if self.refs.is_empty() {
+        if self.nodes.is_empty() {
             return None;
         }
         let o = Vec3A::from(origin);
         let d = Vec3A::from(dir);
         let r = RayPre::new(o, d);
         let mut best_t = t_max;
-        let mut best = u32::MAX;
+        let mut best = usize::MAX;
         let mut best_uv = (0.0f32, 0.0f32);
         let mut stack = [(0u32, 0.0f32); STACK];
         let mut sp = 0usize;
@@ -333,15 +480,16 @@ impl SceneBvh {
                     continue;
                 }
             } else {
-                let [first, count] = self.leaves[(cur & !LEAF) as usize];
-                for pi in first as usize..(first + count) as usize {
-                    let (t, u, v, mut mask) = intersect4(&self.packs[pi], &r, t_min, best_t);
+                let range = leaf_packs(cur);
+                let first = range.start;
+                for (pi, pack) in self.packs[range].iter().enumerate() {
+                    let (t, u, v, mut mask) = intersect4(pack, &r, t_min, best_t);
                     while mask != 0 {
                         let lane = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
                         if t[lane] < best_t {
                             best_t = t[lane];
-                            best = self.pack_tri[pi * 4 + lane];
+                            best = (first + pi) * 4 + lane;
                             best_uv = (u[lane], v[lane]);
                         }
                     }
@@ -350,9 +498,9 @@ impl SceneBvh {
             // Pop the next entry that starts before the closest hit so far.
             loop {
                 if sp == 0 {
-                    return (best != u32::MAX).then(|| Hit {
+                    return (best != usize::MAX).then(|| Hit {
                         t: best_t,
-                        triangle: self.refs[best as usize],
+                        triangle: self.slot_ref[best],
                         bary: Vec3::new(1.0 - best_uv.0 - best_uv.1, best_uv.0, best_uv.1),
                     });
                 }
@@ -366,11 +514,11 @@ impl SceneBvh {
         }
     }
 
-    /// Whether a triangle whose material casts shadows (whatever its opacity) is hit with
-    /// `t_min < t < t_max`.
+    /// Whether a triangle whose material casts shadows and is not fully transparent is hit
+    /// with `t_min < t < t_max`.
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
         let mut hit = false;
-        self.for_each_hit(origin, dir, t_min, t_max, |_, _, _| {
+        self.for_each_pack_hit(origin, dir, t_min, t_max, |_, _, _, _| {
             hit = true;
             false
         });
@@ -383,25 +531,39 @@ impl SceneBvh {
     /// Each triangle counts once; materials that cast no shadows are ignored.
     pub fn any_hit_attenuation(&self, prepared: &PreparedScene, origin: Vec3, dir: Vec3, t_max: f32) -> f32 {
         let mut att = 1.0f32;
-        self.for_each_hit(origin, dir, 0.0, t_max, |i, u, v| {
-            let tr = self.shadow_transparency[i];
-            let tr = if tr == EVALUATE {
-                let s = prepared.surface_at(self.refs[i], Vec3::new(1.0 - u - v, u, v), 0.0);
-                1.0 - s.opacity
-            } else {
-                tr
-            };
-            att *= tr;
-            att > 0.0
+        self.for_each_pack_hit(origin, dir, 0.0, t_max, |slot0, mut mask, u, v| {
+            if mask >> 4 != 0 {
+                // An opaque blocker.
+                att = 0.0;
+                return false;
+            }
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let tr = self.slot_shadow[slot0 + lane];
+                let tr = if tr == EVALUATE {
+                    let s = prepared.surface_at(self.slot_ref[slot0 + lane], Vec3::new(1.0 - u[lane] - v[lane], u[lane], v[lane]), 0.0);
+                    1.0 - s.opacity
+                } else {
+                    tr
+                };
+                att *= tr;
+                if att <= 0.0 {
+                    return false;
+                }
+            }
+            true
         });
         att.max(0.0)
     }
 
-    /// Calls `f(leaf triangle, u, v)` for every triangle hit on the segment, in no particular
-    /// order, until `f` returns false. Cheap triangles (transparency 1) are skipped up front.
+    /// Calls `f(first slot of the pack, mask, u, v)` for every pack with triangles hit on the
+    /// segment that can block light, in no particular order, until `f` returns false. `mask`
+    /// bits 0–3 are the lanes hit (triangles that cast shadows, transparency < 1); bits 4–7
+    /// are set instead (bits 0–3 clear) when one of the lanes hit is opaque.
     #[inline]
-    fn for_each_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, mut f: impl FnMut(usize, f32, f32) -> bool) {
-        if self.refs.is_empty() {
+    fn for_each_pack_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, mut f: impl FnMut(usize, u32, Vec4, Vec4) -> bool) {
+        if self.nodes.is_empty() {
             return;
         }
         let o = Vec3A::from(origin);
@@ -425,14 +587,15 @@ impl SceneBvh {
                     continue;
                 }
             } else {
-                let [first, count] = self.leaves[(cur & !LEAF) as usize];
-                for pi in first as usize..(first + count) as usize {
-                    let (_, u, v, mut mask) = intersect4(&self.packs[pi], &r, t_min, t_max);
-                    while mask != 0 {
-                        let lane = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        let i = self.pack_tri[pi * 4 + lane] as usize;
-                        if self.shadow_transparency[i] != 1.0 && !f(i, u[lane], v[lane]) {
+                let range = leaf_packs(cur);
+                let first = range.start;
+                for (k, (pack, &shadow)) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]).enumerate() {
+                    let (_, u, v, hit) = intersect4(pack, &r, t_min, t_max);
+                    let hit = hit & shadow as u32 & 15;
+                    if hit != 0 {
+                        let opaque = hit & (shadow as u32 >> 4);
+                        let mask = if opaque != 0 { opaque << 4 } else { hit };
+                        if !f((first + k) * 4, mask, u, v) {
                             return;
                         }
                     }
@@ -476,13 +639,8 @@ fn intersect4(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, Vec4, Vec4
     (t, u, v, hit.bitmask())
 }
 
-fn build_rec(prims: &mut [Prim], offset: u32, depth: u32) -> BuildNode {
-    let mut bounds = Bounds::EMPTY;
-    let mut cb = Bounds::EMPTY;
-    for p in prims.iter() {
-        bounds.grow(&p.bounds());
-        cb.grow_point(p.centroid2());
-    }
+fn build_rec(prims: &mut [Prim], pb: PrimBounds, offset: u32, depth: u32) -> BuildNode {
+    let PrimBounds { bounds, centroids: cb } = pb;
     let n = prims.len();
     let leaf = BuildNode::Leaf { bounds, first: offset, count: n as u32 };
     // A split costs at least one node test more than a leaf of one pack.
@@ -491,24 +649,26 @@ fn build_rec(prims: &mut [Prim], offset: u32, depth: u32) -> BuildNode {
     }
     let nb = n.clamp(4, BINS);
     let split = best_split(prims, &cb, &bounds, nb);
-    let mid = match split {
+    let parts = match split {
         Some((axis, bin, cost)) if cost < packs_of(n) * INTERSECT_COST || n > MAX_LEAF => {
             let scale = nb as f32 / (cb.max - cb.min)[axis];
             let lo = cb.min[axis];
             partition(prims, |p| bin_of(p.centroid2()[axis], lo, scale, nb) <= bin)
         }
         Some(_) => return leaf,
-        None if n > MAX_LEAF => n / 2, // all centroids equal: any split is as good
-        None => return leaf,
+        None => (0, PrimBounds::EMPTY, PrimBounds::EMPTY),
     };
-    if mid == 0 || mid == n {
-        return leaf;
-    }
+    let (mid, lb, rb) = match parts {
+        (mid, lb, rb) if mid > 0 && mid < n => (mid, lb, rb),
+        // All centroids equal (or binning could not separate them): any split is as good.
+        _ if n > MAX_LEAF => (n / 2, PrimBounds::of(&prims[..n / 2]), PrimBounds::of(&prims[n / 2..])),
+        _ => return leaf,
+    };
     let (l, r) = prims.split_at_mut(mid);
     let (a, b) = if n >= PARALLEL_MIN {
-        rayon::join(|| build_rec(l, offset, depth + 1), || build_rec(r, offset + mid as u32, depth + 1))
+        rayon::join(|| build_rec(l, lb, offset, depth + 1), || build_rec(r, rb, offset + mid as u32, depth + 1))
     } else {
-        (build_rec(l, offset, depth + 1), build_rec(r, offset + mid as u32, depth + 1))
+        (build_rec(l, lb, offset, depth + 1), build_rec(r, rb, offset + mid as u32, depth + 1))
     };
     BuildNode::Inner { bounds, children: Box::new((a, b)) }
 }
@@ -524,8 +684,42 @@ fn bin_of(c: f32, lo: f32, scale: f32, nb: usize) -> usize {
     (((c - lo) * scale) as usize).min(nb - 1)
 }
 
-/// Binned SAH with `nb ≤ BINS` bins over all three axes at once (one pass over the primitives):
-/// `(axis, last bin of the left side, cost)`.
+/// Per-axis bin boxes and counts.
+#[derive(Clone, Copy)]
+struct Bins {
+    bounds: [[Bounds; BINS]; 3],
+    counts: [[u32; BINS]; 3],
+}
+
+impl Bins {
+    const EMPTY: Self = Self { bounds: [[Bounds::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] };
+    fn merge(mut self, o: Self) -> Self {
+        for axis in 0..3 {
+            for b in 0..BINS {
+                self.bounds[axis][b].grow(&o.bounds[axis][b]);
+                self.counts[axis][b] += o.counts[axis][b];
+            }
+        }
+        self
+    }
+}
+
+fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
+    let mut bins = Bins::EMPTY;
+    for p in prims {
+        // Saturating float → int casts: NaN and negatives land in bin 0.
+        let b = ((p.centroid2() - lo) * scale).as_ivec3().clamp(IVec3::ZERO, IVec3::splat(nb as i32 - 1)).to_array().map(|x| x as usize);
+        let pb = p.bounds();
+        for ((bounds, counts), b) in bins.bounds.iter_mut().zip(&mut bins.counts).zip(b) {
+            bounds[b].grow(&pb);
+            counts[b] += 1;
+        }
+    }
+    bins
+}
+
+/// Binned SAH with `nb ≤ BINS` bins over all three axes at once (one pass over the primitives,
+/// in parallel chunks for large nodes): `(axis, last bin of the left side, cost)`.
 fn best_split(prims: &[Prim], cb: &Bounds, bounds: &Bounds, nb: usize) -> Option<(usize, usize, f32)> {
     let extent = cb.max - cb.min;
     let usable = [0, 1, 2].map(|a| extent[a] > 0.0 && extent[a].is_finite());
@@ -533,23 +727,16 @@ fn best_split(prims: &[Prim], cb: &Bounds, bounds: &Bounds, nb: usize) -> Option
         return None;
     }
     let scale = Vec3A::from_array([0, 1, 2].map(|a| if usable[a] { nb as f32 / extent[a] } else { 0.0 }));
-    let mut bins = [[Bounds::EMPTY; BINS]; 3];
-    let mut counts = [[0u32; BINS]; 3];
-    for p in prims {
-        // Saturating float → int casts: NaN and negatives land in bin 0.
-        let b =
-            ((p.centroid2() - cb.min) * scale).as_ivec3().clamp(IVec3::ZERO, IVec3::splat(nb as i32 - 1)).to_array().map(|x| x as usize);
-        let pb = p.bounds();
-        for axis in 0..3 {
-            bins[axis][b[axis]].grow(&pb);
-            counts[axis][b[axis]] += 1;
-        }
-    }
+    let bins = if prims.len() >= PARALLEL_BIN_MIN {
+        prims.par_chunks(PARALLEL_BIN_MIN / 2).map(|c| bin_prims(c, cb.min, scale, nb)).reduce(|| Bins::EMPTY, Bins::merge)
+    } else {
+        bin_prims(prims, cb.min, scale, nb)
+    };
     let mut best: Option<(usize, usize, f32)> = None;
     let inv_area = 1.0 / bounds.half_area().max(f32::MIN_POSITIVE);
     let total = prims.len() as u32;
     for axis in (0..3).filter(|&a| usable[a]) {
-        let (bins, counts) = (&bins[axis], &counts[axis]);
+        let (bins, counts) = (&bins.bounds[axis], &bins.counts[axis]);
         // Sweep from the right, then from the left.
         let mut right_area = [0.0f32; BINS];
         let mut acc = Bounds::EMPTY;
@@ -576,19 +763,24 @@ fn best_split(prims: &[Prim], cb: &Bounds, bounds: &Bounds, nb: usize) -> Option
     best
 }
 
-/// In-place partition: elements with `pred` true first; returns how many.
-fn partition(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> usize {
+/// In-place partition: elements with `pred` true first; returns how many, and the boxes of
+/// both sides (gathered on the way, so the children need no pass of their own).
+fn partition(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> (usize, PrimBounds, PrimBounds) {
+    let (mut lb, mut rb) = (PrimBounds::EMPTY, PrimBounds::EMPTY);
     let mut i = 0;
     let mut j = v.len();
     while i < j {
-        if pred(&v[i]) {
+        let p = v[i];
+        if pred(&p) {
+            lb.add(&p);
             i += 1;
         } else {
+            rb.add(&p);
             j -= 1;
             v.swap(i, j);
         }
     }
-    i
+    (i, lb, rb)
 }
 
 fn bounds_of(n: &BuildNode) -> &Bounds {
@@ -598,17 +790,16 @@ fn bounds_of(n: &BuildNode) -> &Bounds {
 }
 
 /// Collapses the binary build tree into 4-wide nodes (each node takes up to four descendants,
-/// opening the largest-area inner child first); returns the reference to `n`.
-fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, leaves: &mut Vec<[u32; 2]>) -> u32 {
+/// opening the largest-area inner child first), packing leaves on the way; returns the
+/// reference to `n`.
+fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, packer: &mut Packer) -> u32 {
     match n {
-        BuildNode::Leaf { first, count, .. } => {
-            leaves.push([*first, *count]);
-            LEAF | (leaves.len() - 1) as u32
-        }
+        BuildNode::Leaf { first, count, .. } => packer.leaf(*first, *count, nodes),
         BuildNode::Inner { children, .. } => {
-            let mut kids: Vec<&BuildNode> = vec![&children.0, &children.1];
-            while kids.len() < 4 {
-                let open = kids
+            let mut kids: [&BuildNode; 4] = [&children.0, &children.1, &children.1, &children.1];
+            let mut len = 2;
+            while len < 4 {
+                let open = kids[..len]
                     .iter()
                     .enumerate()
                     .filter(|(_, k)| matches!(k, BuildNode::Inner { .. }))
@@ -616,15 +807,17 @@ fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, leaves: &mut Vec<[u32; 2]>) -
                     .map(|(i, _)| i);
                 let Some(i) = open else { break };
                 if let BuildNode::Inner { children, .. } = kids[i] {
+                    kids.copy_within(i + 1..len, i + 2);
                     kids[i] = &children.0;
-                    kids.insert(i + 1, &children.1);
+                    kids[i + 1] = &children.1;
+                    len += 1;
                 }
             }
             let idx = nodes.len();
             nodes.push(Node4::EMPTY);
             let mut node = Node4::EMPTY;
-            for (k, kid) in kids.iter().enumerate() {
-                let r = collapse(kid, nodes, leaves);
+            for (k, kid) in kids[..len].iter().enumerate() {
+                let r = collapse(kid, nodes, packer);
                 node.set(k, bounds_of(kid), r);
             }
             nodes[idx] = node;
@@ -637,7 +830,7 @@ fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, leaves: &mut Vec<[u32; 2]>) -
 mod tests {
     use super::*;
     use glam::Vec2;
-    use hybrid_scene::{Material, Mesh, Object, ObjectSource, Scene, Transform};
+    use hybrid_scene::{Material, Mesh, Object, ObjectSource, Scene, Texture, Transform};
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
 
@@ -765,28 +958,104 @@ mod tests {
         let p = PreparedScene::new(&scene);
         let a = SceneBvh::build(&p);
         let b = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool").install(|| SceneBvh::build(&p));
-        assert_eq!(a.refs, b.refs);
+        assert_eq!(a.slot_ref, b.slot_ref);
         assert_eq!(a.nodes.len(), b.nodes.len());
-        assert_eq!(a.leaves, b.leaves);
+        assert_eq!(a.leaf_count(), b.leaf_count());
         let bits = |n: &Node4| (n.lo.map(|v| v.to_array().map(f32::to_bits)), n.hi.map(|v| v.to_array().map(f32::to_bits)), n.child);
         assert!(a.nodes.iter().zip(&b.nodes).all(|(x, y)| bits(x) == bits(y)));
-        // Every triangle is in exactly one leaf.
-        let mut seen = vec![false; a.refs.len()];
-        for &[first, count] in &a.leaves {
-            for k in first * 4..(first + count) * 4 {
-                let i = a.pack_tri[k as usize];
-                if i != NO_TRI {
-                    assert!(!seen[i as usize]);
-                    seen[i as usize] = true;
-                }
-            }
-        }
-        assert!(seen.iter().all(|&s| s));
+        // Every triangle is in exactly one leaf slot, every pack in exactly one leaf.
+        let (seen, packs) = coverage(&a, &p.triangles);
+        assert!(seen.iter().all(|&s| s == 1));
+        assert!(packs.iter().all(|&s| s == 1));
+        assert_eq!(a.triangle_count(), 20_000);
 
         let empty = soup_scene(0, 1, vec![Material::default()]);
         let p = PreparedScene::new(&empty);
         let bvh = SceneBvh::build(&p);
         assert!(bvh.closest_hit(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY).is_none());
         assert_eq!(bvh.any_hit_attenuation(&p, Vec3::ZERO, Vec3::X, f32::INFINITY), 1.0);
+    }
+
+    /// How often each triangle (by index in `p.triangles`) and each pack is reached from the
+    /// root, walking every node.
+    fn coverage(bvh: &SceneBvh, triangles: &[TriangleRef]) -> (Vec<u32>, Vec<u32>) {
+        let index: std::collections::HashMap<(u32, u32), usize> =
+            triangles.iter().enumerate().map(|(i, t)| ((t.mesh, t.triangle), i)).collect();
+        let mut seen = vec![0u32; triangles.len()];
+        let mut packs = vec![0u32; bvh.packs.len()];
+        let mut todo = vec![0u32];
+        while let Some(c) = todo.pop() {
+            if c == EMPTY_SLOT {
+                continue;
+            }
+            if c & LEAF == 0 {
+                todo.extend(bvh.nodes[c as usize].child);
+                continue;
+            }
+            for pi in leaf_packs(c) {
+                packs[pi] += 1;
+                for slot in pi * 4..pi * 4 + 4 {
+                    let t = bvh.slot_ref[slot];
+                    if t != NO_TRI {
+                        seen[index[&(t.mesh, t.triangle)]] += 1;
+                    }
+                }
+            }
+        }
+        (seen, packs)
+    }
+
+    #[test]
+    fn oversized_leaves_split_under_extra_nodes() {
+        let scene = soup_scene(150, 4, vec![Material::default()]);
+        let p = PreparedScene::new(&scene);
+        let corners: Vec<[Vec3; 3]> = p.triangles.iter().map(|t| p.triangle(*t)).collect();
+        let order: Vec<u32> = (0..150).collect();
+        let mut packer = Packer { corners: &corners, order: &order, packs: Vec::new(), slot_tri: Vec::new(), leaves: 0 };
+        let mut nodes = Vec::new();
+        // 150 triangles = 38 packs: one extra node over four leaves of ≤ 16 packs.
+        let r = packer.leaf(0, 150, &mut nodes);
+        assert_eq!(r, 0);
+        assert_eq!(nodes.len(), 1);
+        assert_eq!(packer.leaves, 4);
+        let mut seen = vec![0; 150];
+        for (k, &c) in nodes[0].child.iter().enumerate() {
+            assert!(c & LEAF != 0);
+            let packs = leaf_packs(c);
+            assert!(packs.len() <= MAX_LEAF_PACKS);
+            for slot in packs.start * 4..packs.end * 4 {
+                let t = packer.slot_tri[slot];
+                if t != u32::MAX {
+                    seen[t as usize] += 1;
+                    // The child box holds the triangle.
+                    for v in corners[t as usize] {
+                        for axis in 0..3 {
+                            assert!(nodes[0].lo[axis][k] <= v[axis] && v[axis] <= nodes[0].hi[axis][k]);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s == 1));
+    }
+
+    #[test]
+    fn shadow_class_of_materials() {
+        let tex = |alphas: [u8; 4]| Texture::new("t", 2, 2, alphas.map(|a| [200, 100, 50, a]).to_vec(), hybrid_scene::ColorSpace::Srgb);
+        let textures = vec![tex([255; 4]), tex([255, 255, 0, 255]), tex([128; 4])];
+        let m = |opacity: f32, diffuse_map: Option<usize>| Material { opacity, diffuse_map, ..Default::default() };
+        assert_eq!(material_shadow(&m(1.0, None), &textures), 0.0);
+        assert_eq!(material_shadow(&m(0.25, None), &textures), 0.75);
+        assert_eq!(material_shadow(&m(1.0, Some(0)), &textures), 0.0);
+        assert_eq!(material_shadow(&m(1.0, Some(1)), &textures), EVALUATE);
+        assert!((material_shadow(&m(1.0, Some(2)), &textures) - (1.0 - 128.0 / 255.0)).abs() < 1e-6);
+        assert_eq!(material_shadow(&m(0.0, Some(1)), &textures), 1.0);
+        assert_eq!(material_shadow(&Material { casts_shadows: false, ..m(1.0, None) }, &textures), 1.0);
+        // A missing texture is evaluated at the hit (where `surface_at` decides).
+        assert_eq!(material_shadow(&m(1.0, Some(9)), &textures), EVALUATE);
+        let optical = Material { optical_map: Some(1), ..m(1.0, None) };
+        // Texture 1's blue channel is constant (50): opacity = 50/255 in sRGB → linear.
+        let tr = material_shadow(&optical, &textures);
+        assert!((tr - (1.0 - textures[1].texel(0, 0, 0).z)).abs() < 1e-6 && tr > 0.5, "{tr}");
     }
 }
