@@ -316,6 +316,11 @@ impl Cloud {
     }
 }
 
+thread_local! {
+    /// Traversal stack for trace-stage queries (one per worker thread, no allocation per ray).
+    static SECONDARY_STACK: std::cell::RefCell<TraversalStack> = std::cell::RefCell::new(TraversalStack::default());
+}
+
 /// The point-cloud capsule: spheres traced through their own BVH, Blinn–Phong shaded with the
 /// scene's lights and ambient, packed with their synthesized depth.
 pub struct PointCloudCapsule {
@@ -363,24 +368,29 @@ impl PointCloudCapsule {
 
     /// Traces one primary ray: `Some((linear colour, t))` of the closest sphere before `t_max`.
     #[inline]
-    fn shade_ray(&self, stack: &mut TraversalStack, ray: &PrimaryRay, t_max: f32) -> Option<(Vec3, f32)> {
+    /// The nearest sphere over all clouds: (t, cloud index, BVH slot).
+    fn closest_slot(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, usize, u32)> {
         let mut best: Option<(f32, usize, u32)> = None;
         let mut limit = t_max;
         for (ci, cloud) in self.clouds.iter().enumerate() {
-            if let Some((t, slot)) = cloud.bvh.closest_hit_slot_with(stack, ray.origin, ray.dir, ray.t_min, limit)
+            if let Some((t, slot)) = cloud.bvh.closest_hit_slot_with(stack, origin, dir, t_min, limit)
                 && best.is_none_or(|b| t < b.0)
             {
                 best = Some((t, ci, slot));
                 limit = t;
             }
         }
-        let (t, ci, slot) = best?;
+        best
+    }
+
+    /// The surface of sphere `slot` of cloud `ci` at `position`, hit by a ray along `dir`: the
+    /// shading inputs the capsule uses (albedo as diffuse and ambient, the cloud's specular).
+    fn sphere_surface(&self, ci: usize, slot: u32, position: Vec3, dir: Vec3) -> Surface {
         let cloud = &self.clouds[ci];
         let center = cloud.bvh.center_of_slot(slot);
-        let position = ray.origin + ray.dir * t;
-        let normal = ((position - center) / cloud.bvh.radius()).normalize_or(-ray.dir);
+        let normal = ((position - center) / cloud.bvh.radius()).normalize_or(-dir);
         let albedo = cloud.albedo(slot, center);
-        let s = Surface {
+        Surface {
             position,
             normal,
             diffuse: albedo,
@@ -390,7 +400,29 @@ impl PointCloudCapsule {
             shininess: cloud.shininess,
             ior: 1.0,
             ..Default::default()
-        };
+        }
+    }
+
+    /// Beyond paper 2: the spheres as geometry of the trace stage. The closest sphere along a
+    /// ray within (`t_min`, `t_max`) and its surface, so reflections and refractions show the
+    /// point cloud.
+    pub fn closest_surface(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, Surface)> {
+        SECONDARY_STACK.with_borrow_mut(|stack| {
+            let (t, ci, slot) = self.closest_slot(stack, origin, dir, t_min, t_max)?;
+            Some((t, self.sphere_surface(ci, slot, origin + dir * t, dir)))
+        })
+    }
+
+    /// Beyond paper 2: whether any sphere blocks a shadow ray (spheres are opaque casters).
+    pub fn occluded(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
+        SECONDARY_STACK.with_borrow_mut(|stack| {
+            self.clouds.iter().any(|cloud| cloud.bvh.closest_hit_slot_with(stack, origin, dir, t_min, t_max).is_some())
+        })
+    }
+
+    fn shade_ray(&self, stack: &mut TraversalStack, ray: &PrimaryRay, t_max: f32) -> Option<(Vec3, f32)> {
+        let (t, ci, slot) = self.closest_slot(stack, ray.origin, ray.dir, ray.t_min, t_max)?;
+        let s = self.sphere_surface(ci, slot, ray.origin + ray.dir * t, ray.dir);
         Some((local_lighting(&s, -ray.dir, &self.lights, &self.env), t))
     }
 }
