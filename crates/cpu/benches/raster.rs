@@ -3,8 +3,12 @@
 //! the deferred lighting pass. Built in code, so it needs no asset files.
 //!
 //! Run: `cargo bench -p hybrid-cpu --bench raster`
+//!
+//! CPU-time mode (for before/after comparisons on a loaded machine): `RASTER_CPU=20 cargo bench
+//! -p hybrid-cpu --bench raster` runs each pass 20 times on a 1-thread rayon pool and prints the
+//! process CPU time per frame (from `/proc/self/stat`), plus checksums of the outputs.
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{Criterion, criterion_group};
 use glam::{Vec2, Vec3};
 use hybrid_core::GBuffer;
 use hybrid_cpu::PreparedScene;
@@ -141,5 +145,66 @@ fn raster(c: &mut Criterion) {
     group.finish();
 }
 
+/// Process CPU time (user + system) in ms, from `/proc/self/stat` (Linux; 0 elsewhere).
+fn cpu_ms() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else { return 0.0 };
+    // Fields after the command name (which is in parentheses): utime is the 12th, stime the 13th.
+    let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r) else { return 0.0 };
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) * 10.0
+}
+
+fn checksum<T: Copy>(v: &[T], bits: impl Fn(T) -> Vec<u32>) -> u64 {
+    v.iter().flat_map(|x| bits(*x)).fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
+}
+
+fn cpu_mode(iters: u32) {
+    let (scene, camera) = bench_scene();
+    let prepared = PreparedScene::new(&scene);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let mut g = GBuffer::new(W, H);
+    pool.install(|| rasterize_into(&prepared, &camera, None, &mut g));
+    let t0 = cpu_ms();
+    let w0 = std::time::Instant::now();
+    for _ in 0..iters {
+        pool.install(|| rasterize_into(&prepared, &camera, None, &mut g));
+    }
+    let (raster_cpu, raster_wall) = ((cpu_ms() - t0) / iters as f64, w0.elapsed().as_secs_f64() * 1e3 / iters as f64);
+    let mut lit = Vec::new();
+    let t0 = cpu_ms();
+    let w0 = std::time::Instant::now();
+    for _ in 0..iters {
+        lit = pool.install(|| deferred_lighting(&g, &scene, &camera));
+    }
+    let (light_cpu, light_wall) = ((cpu_ms() - t0) / iters as f64, w0.elapsed().as_secs_f64() * 1e3 / iters as f64);
+    let v3 = |v: Vec3| v.to_array().map(f32::to_bits).to_vec();
+    let v4 = |v: glam::Vec4| v.to_array().map(f32::to_bits).to_vec();
+    let gsum = [
+        checksum(&g.position, v3),
+        checksum(&g.normal, v3),
+        checksum(&g.emission, v3),
+        checksum(&g.ambient, v3),
+        checksum(&g.diffuse, v4),
+        checksum(&g.specular, v4),
+        checksum(&g.optical, v3),
+        checksum(&g.object_id, |x| vec![x]),
+        checksum(&g.depth, |x| vec![x.to_bits()]),
+    ];
+    println!(
+        "1 thread, {iters} iterations: rasterize_into {raster_cpu:.1} ms CPU ({raster_wall:.1} wall), deferred_lighting {light_cpu:.1} ms CPU ({light_wall:.1} wall)"
+    );
+    println!("gbuffer checksums {gsum:016x?}");
+    println!("lighting checksum {:016x}", checksum(&lit, v3));
+}
+
 criterion_group!(benches, raster);
-criterion_main!(benches);
+
+fn main() {
+    if let Some(n) = std::env::var("RASTER_CPU").ok().and_then(|v| v.parse::<u32>().ok()) {
+        cpu_mode(n.max(1));
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -6,8 +6,8 @@
 //! trace stage's `rt-only` mode use the same rays, so both modes agree.
 
 use glam::Vec3;
-use hybrid_core::GBuffer;
-use hybrid_core::shading::{local_lighting, sky};
+use hybrid_core::shading::{FrameLights, sky};
+use hybrid_core::{GBuffer, NO_OBJECT, Surface};
 use hybrid_scene::{Camera, Projection, Scene};
 use rayon::prelude::*;
 
@@ -88,22 +88,55 @@ pub fn primary_ray(camera: &Camera, width: u32, height: u32, px: u32, py: u32) -
     ViewRays::new(camera, width, height).ray(px, py)
 }
 
+/// Rows per parallel task of [`deferred_lighting`].
+const LIGHTING_ROWS: usize = 8;
+
 /// Listing 5 over the whole G-buffer: the P-buffer (linear RGB, row-major). Deterministic and
-/// parallel over rows.
+/// parallel over rows. Per-light constants are computed once per frame ([`FrameLights`]), and
+/// only the targets lighting needs are read (same result as `local_lighting` per pixel).
 pub fn deferred_lighting(gbuffer: &GBuffer, scene: &Scene, camera: &Camera) -> Vec<Vec3> {
     let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
-    let mut out = vec![Vec3::ZERO; gbuffer.len()];
-    if w == 0 || h == 0 || out.len() != w * h {
-        return out;
+    let n = gbuffer.len();
+    if w == 0 || h == 0 || n != w * h {
+        return vec![Vec3::ZERO; n];
     }
+    let mut out = vec![Vec3::ZERO; n];
     let rays = ViewRays::new(camera, gbuffer.width, gbuffer.height);
     let env = &scene.environment;
-    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-        for (x, px) in row.iter_mut().enumerate() {
-            let i = y * w + x;
-            *px = match gbuffer.surface(i) {
-                Some(s) => local_lighting(&s, rays.view_dir(s.position), &scene.lights, env),
-                None => sky(env, &scene.textures, rays.ray(x as u32, y as u32).1),
+    let frame_lights = FrameLights::new(&scene.lights, env);
+    let g = gbuffer;
+    out.par_chunks_mut(w * LIGHTING_ROWS).enumerate().for_each(|(band, rows)| {
+        let base = band * w * LIGHTING_ROWS;
+        let range = base..base + rows.len();
+        let (ids, pos, nrm, emi, amb, dif, spe) = (
+            &g.object_id[range.clone()],
+            &g.position[range.clone()],
+            &g.normal[range.clone()],
+            &g.emission[range.clone()],
+            &g.ambient[range.clone()],
+            &g.diffuse[range.clone()],
+            &g.specular[range],
+        );
+        for (k, px) in rows.iter_mut().enumerate() {
+            *px = if ids[k] == NO_OBJECT {
+                let i = base + k;
+                sky(env, &scene.textures, rays.ray((i % w) as u32, (i / w) as u32).1)
+            } else {
+                let (d, s) = (dif[k], spe[k]);
+                // The fields lighting reads, exactly as `GBuffer::surface` gives them.
+                let surface = Surface {
+                    position: pos[k],
+                    normal: nrm[k],
+                    emission: emi[k],
+                    ambient: amb[k],
+                    diffuse: d.truncate(),
+                    opacity: d.w,
+                    specular: s.truncate(),
+                    shininess: s.w,
+                    reflectivity: 0.0,
+                    ior: 1.0,
+                };
+                frame_lights.local_lighting(&surface, rays.view_dir(surface.position))
             };
         }
     });

@@ -5,7 +5,7 @@
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use hybrid_core::Surface;
 use hybrid_scene::model::normal_matrix;
-use hybrid_scene::{Aabb, Material, Scene, Texture};
+use hybrid_scene::{Aabb, ColorSpace, Material, Scene, Texture};
 
 /// One mesh of one object, transformed to world space.
 #[derive(Debug, Clone)]
@@ -89,21 +89,112 @@ impl<'s> PreparedScene<'s> {
 
     /// The surface at barycentric coordinates `bary` (weights of the three corners, summing to 1)
     /// of triangle `t`. `uv_footprint` is the UV change per pixel for mip selection (0 = finest).
+    /// Same as `self.triangle_surface(t).at(bary, uv_footprint)`.
     pub fn surface_at(&self, t: TriangleRef, bary: Vec3, uv_footprint: f32) -> Surface {
+        self.triangle_surface(t).at(bary, uv_footprint)
+    }
+
+    /// Everything [`Self::surface_at`] needs of triangle `t` gathered once (corner attributes,
+    /// material, the geometric normal of flat triangles), for evaluating many points of one
+    /// triangle (the raster's pixels of one winner).
+    #[inline]
+    pub fn triangle_surface(&self, t: TriangleRef) -> TriangleSurface<'_> {
         let mesh = &self.meshes[t.mesh as usize];
         let [i0, i1, i2] = mesh.indices[t.triangle as usize].map(|i| i as usize);
-        let lerp3 = |a: Vec3, b: Vec3, c: Vec3| a * bary.x + b * bary.y + c * bary.z;
-        let position = lerp3(mesh.positions[i0], mesh.positions[i1], mesh.positions[i2]);
-        let geometric = (mesh.positions[i1] - mesh.positions[i0]).cross(mesh.positions[i2] - mesh.positions[i0]).normalize_or(Vec3::Y);
-        let mut normal = if mesh.normals.is_empty() {
-            geometric
+        let corners = |v: &[Vec3]| if v.is_empty() { None } else { Some([v[i0], v[i1], v[i2]]) };
+        let material = &self.scene.materials[mesh.material];
+        let positions = [mesh.positions[i0], mesh.positions[i1], mesh.positions[i2]];
+        let normals = corners(&mesh.normals);
+        let geometric = geometric_normal(positions);
+        let tangents = if material.normal_map.is_some() && !mesh.tangents.is_empty() {
+            Some([mesh.tangents[i0], mesh.tangents[i1], mesh.tangents[i2]])
         } else {
-            lerp3(mesh.normals[i0], mesh.normals[i1], mesh.normals[i2]).normalize_or(geometric)
+            None
         };
-        let uv = if mesh.uvs.is_empty() { Vec2::ZERO } else { mesh.uvs[i0] * bary.x + mesh.uvs[i1] * bary.y + mesh.uvs[i2] * bary.z };
-        let color = if mesh.colors.is_empty() { Vec3::ONE } else { lerp3(mesh.colors[i0], mesh.colors[i1], mesh.colors[i2]) };
-        let mat = &self.scene.materials[mesh.material];
-        let tex = &self.scene.textures;
+        TriangleSurface {
+            material,
+            textures: &self.scene.textures,
+            positions,
+            normals,
+            geometric,
+            uvs: if mesh.uvs.is_empty() { None } else { Some([mesh.uvs[i0], mesh.uvs[i1], mesh.uvs[i2]]) },
+            colors: corners(&mesh.colors),
+            tangents,
+            textured: material.emission_map.is_some()
+                || material.ambient_map.is_some()
+                || material.diffuse_map.is_some()
+                || material.specular_map.is_some()
+                || material.normal_map.is_some()
+                || material.optical_map.is_some(),
+        }
+    }
+}
+
+/// The unit geometric normal of a triangle (Y when degenerate).
+#[inline]
+fn geometric_normal(p: [Vec3; 3]) -> Vec3 {
+    (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(Vec3::Y)
+}
+
+/// One triangle's corner attributes and material, ready to evaluate surfaces at many points
+/// ([`PreparedScene::triangle_surface`]).
+#[derive(Debug, Clone, Copy)]
+pub struct TriangleSurface<'a> {
+    material: &'a Material,
+    textures: &'a [Texture],
+    positions: [Vec3; 3],
+    normals: Option<[Vec3; 3]>,
+    geometric: Vec3,
+    uvs: Option<[Vec2; 3]>,
+    colors: Option<[Vec3; 3]>,
+    /// Only where the material has a normal map and the mesh tangents.
+    tangents: Option<[Vec4; 3]>,
+    textured: bool,
+}
+
+impl TriangleSurface<'_> {
+    /// Whether the triangle has UVs and its material any texture map (else the UV footprint
+    /// passed to [`Self::at`] is unused).
+    #[inline]
+    pub fn uses_footprint(&self) -> bool {
+        self.textured && self.uvs.is_some()
+    }
+
+    /// The corner UVs (`None` for meshes without UVs).
+    #[inline]
+    pub fn uvs(&self) -> Option<[Vec2; 3]> {
+        self.uvs
+    }
+
+    /// The surface at barycentric coordinates `bary` with UV footprint `uv_footprint`; see
+    /// [`PreparedScene::surface_at`].
+    #[inline]
+    pub fn at(&self, bary: Vec3, uv_footprint: f32) -> Surface {
+        let lerp3 = |v: [Vec3; 3]| v[0] * bary.x + v[1] * bary.y + v[2] * bary.z;
+        let position = lerp3(self.positions);
+        let mut normal = match self.normals {
+            None => self.geometric,
+            Some(n) => lerp3(n).normalize_or(self.geometric),
+        };
+        let mat = self.material;
+        let color = self.colors.map_or(Vec3::ONE, lerp3);
+        if !self.textured {
+            // No maps: every sample would be 1 (multiplying by it is exact), so skip them.
+            return Surface {
+                position,
+                normal,
+                emission: mat.emission,
+                ambient: mat.ambient,
+                diffuse: mat.diffuse * color,
+                opacity: mat.opacity.clamp(0.0, 1.0),
+                specular: mat.specular,
+                shininess: mat.shininess.clamp(0.0, 1.0),
+                reflectivity: mat.reflectivity.clamp(0.0, 1.0),
+                ior: mat.ior,
+            };
+        }
+        let uv = self.uvs.map_or(Vec2::ZERO, |u| u[0] * bary.x + u[1] * bary.y + u[2] * bary.z);
+        let tex = self.textures;
         let uv = mat.offset + uv * mat.tiling;
         let footprint = uv_footprint * mat.tiling.abs().max_element();
         let sample = |id: Option<usize>| -> Vec4 {
@@ -112,13 +203,11 @@ impl<'s> PreparedScene<'s> {
                 None => Vec4::ONE,
             }
         };
-        if let Some(nm) = mat.normal_map
-            && !mesh.tangents.is_empty()
-        {
-            let t4 = mesh.tangents[i0] * bary.x + mesh.tangents[i1] * bary.y + mesh.tangents[i2] * bary.z;
+        if let (Some(nm), Some(tg)) = (mat.normal_map, self.tangents) {
+            let t4 = tg[0] * bary.x + tg[1] * bary.y + tg[2] * bary.z;
             let tangent = (t4.truncate() - normal * normal.dot(t4.truncate())).normalize_or_zero();
             if tangent != Vec3::ZERO {
-                let sign = if mesh.tangents[i0].w < 0.0 { -1.0 } else { 1.0 };
+                let sign = if tg[0].w < 0.0 { -1.0 } else { 1.0 };
                 let bitangent = normal.cross(tangent) * sign;
                 let n_ts = sample_texture(&tex[nm], uv, footprint).truncate() * 2.0 - Vec3::ONE;
                 normal = (tangent * n_ts.x + bitangent * n_ts.y + normal * n_ts.z).normalize_or(normal);
@@ -143,8 +232,130 @@ impl<'s> PreparedScene<'s> {
     }
 }
 
-/// Trilinear texture sample for a UV footprint (UV units per pixel).
+/// Trilinear texture sample for a UV footprint (UV units per pixel): exactly (bit for bit)
+/// `t.sample(uv, t.lod_for_footprint(footprint))`, without the per-call overheads of the generic
+/// path (library `floor` calls, the lazily built sRGB table, bounds checks per texel).
 #[inline]
 pub fn sample_texture(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
-    t.sample(uv, t.lod_for_footprint(footprint))
+    let lod = t.lod_for_footprint(footprint);
+    let max = (t.levels.len() - 1) as f32;
+    let lod = if lod.is_finite() { lod.clamp(0.0, max) } else { 0.0 };
+    let l0 = floor(lod);
+    let f = lod - l0;
+    let a = bilinear(t, uv, l0 as usize);
+    if f <= 1e-4 { a } else { a.lerp(bilinear(t, uv, l0 as usize + 1), f) }
+}
+
+/// `x.floor()` for every finite `x` (and ±∞, NaN), except that −0 becomes +0 (which no caller
+/// below can tell apart), without a library call on targets lacking SSE4.1.
+#[inline(always)]
+fn floor(x: f32) -> f32 {
+    if x.abs() < 8_388_608.0 {
+        let t = x as i32 as f32;
+        if t > x { t - 1.0 } else { t }
+    } else {
+        // |x| ≥ 2²³ is already integral (or not finite).
+        x
+    }
+}
+
+/// 256-entry sRGB → linear table, the same values `Texture::texel` uses.
+fn srgb_table() -> &'static [f32; 256] {
+    static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    LUT.get_or_init(|| std::array::from_fn(|i| hybrid_scene::texture::srgb_to_linear(i as f32 / 255.0)))
+}
+
+/// `Texture::sample_bilinear`, same arithmetic in the same order.
+#[inline]
+fn bilinear(t: &Texture, uv: Vec2, level: usize) -> Vec4 {
+    let level = level.min(t.levels.len() - 1);
+    let l = &t.levels[level];
+    if !uv.x.is_finite() || !uv.y.is_finite() {
+        return t.texel(level, 0, 0);
+    }
+    let x = (uv.x - floor(uv.x)) * l.width as f32 - 0.5;
+    let y = (uv.y - floor(uv.y)) * l.height as f32 - 0.5;
+    let (x0, y0) = (floor(x), floor(y));
+    let (fx, fy) = (x - x0, y - y0);
+    let wrap = |i: i64, n: u32| -> u32 {
+        let n = n as i64;
+        (if i < 0 {
+            i + n
+        } else if i >= n {
+            i - n
+        } else {
+            i
+        })
+        .clamp(0, n - 1) as u32
+    };
+    let (ix0, iy0) = (wrap(x0 as i64, l.width), wrap(y0 as i64, l.height));
+    let (ix1, iy1) = (wrap(x0 as i64 + 1, l.width), wrap(y0 as i64 + 1, l.height));
+    let (r0, r1) = ((iy0 * l.width) as usize, (iy1 * l.width) as usize);
+    let (Some(&t00), Some(&t10), Some(&t01), Some(&t11)) = (
+        l.texels.get(r0 + ix0 as usize),
+        l.texels.get(r0 + ix1 as usize),
+        l.texels.get(r1 + ix0 as usize),
+        l.texels.get(r1 + ix1 as usize),
+    ) else {
+        return t.sample_bilinear(uv, level);
+    };
+    let srgb = t.color_space == ColorSpace::Srgb;
+    let lut = srgb_table();
+    let decode = |p: [u8; 4]| -> Vec4 {
+        if srgb {
+            Vec4::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize], p[3] as f32 / 255.0)
+        } else {
+            Vec4::new(p[0] as f32, p[1] as f32, p[2] as f32, p[3] as f32) / 255.0
+        }
+    };
+    let a = decode(t00).lerp(decode(t10), fx);
+    let b = decode(t01).lerp(decode(t11), fx);
+    a.lerp(b, fy)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Deterministic pseudo-random numbers (xorshift).
+    struct Rng(u64);
+    impl Rng {
+        fn f(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
+    #[test]
+    fn fast_sampler_matches_texture_sample_bit_for_bit() {
+        let texels: Vec<[u8; 4]> =
+            (0..37u32 * 20).map(|i| [(i * 7) as u8, (i * 13 + 5) as u8, (i * 29) as u8, (i * 3 + 100) as u8]).collect();
+        let mut rng = Rng(0x1234_5678_9abc_def1);
+        for cs in [ColorSpace::Srgb, ColorSpace::Linear] {
+            let t = Texture::new("t", 37, 20, texels.clone(), cs);
+            let special = [0.0, -0.0, 1.0, -1.0, 0.5, -1e-9, 1e-9, 0.999_999_9, 3.0e7, -3.0e7, f32::NAN, f32::INFINITY];
+            for k in 0..20_000 {
+                let (u, v) = if k < special.len() * special.len() {
+                    (special[k % special.len()], special[k / special.len()])
+                } else {
+                    ((rng.f() - 0.5) * 40.0, (rng.f() - 0.5) * 7.0)
+                };
+                let footprint = match k % 4 {
+                    0 => 0.0,
+                    1 => rng.f() * 0.05,
+                    2 => rng.f() * 2.0,
+                    _ => rng.f() * 1e-3,
+                };
+                let uv = Vec2::new(u, v);
+                let want = t.sample(uv, t.lod_for_footprint(footprint));
+                let got = sample_texture(&t, uv, footprint);
+                assert_eq!(want.to_array().map(f32::to_bits), got.to_array().map(f32::to_bits), "uv {uv} footprint {footprint} {cs:?}");
+            }
+        }
+        for x in [-2.5f32, -1.0, -0.5, -0.0, 0.0, 0.3, 1.0, 2.7, 8_388_607.5, -8_388_607.5, 1e10, -1e10] {
+            assert_eq!(floor(x), x.floor(), "floor {x}");
+        }
+    }
 }

@@ -23,7 +23,7 @@ use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
-use crate::prepare::PreparedScene;
+use crate::prepare::{PreparedScene, TriangleSurface};
 
 /// Rows per band (the unit of parallel work and of binning).
 pub const BAND_ROWS: u32 = 16;
@@ -728,7 +728,9 @@ impl BandContext<'_, '_> {
             }
         }
 
-        // Shading of the winners.
+        // Shading of the winners. Consecutive pixels mostly share their winner: its corner
+        // attributes and material are gathered once per run.
+        let mut cached: Option<(u32, u32, &ShadeTri, TriangleSurface<'_>)> = None;
         for i in 0..len {
             let (x, y) = ((i % w) as u32, y_lo + (i / w) as u32);
             match ids[i] {
@@ -745,9 +747,18 @@ impl BandContext<'_, '_> {
                     }
                 }
                 id => {
-                    let st = &self.chunks[(id >> CHUNK_SHIFT) as usize].shade[(id & ((1 << CHUNK_SHIFT) - 1)) as usize];
-                    let (object, s) = self.shade(st, x, y);
-                    out.write(i, object, depth[i], &s);
+                    let (object, st, ts) = match cached {
+                        Some((cid, object, st, ts)) if cid == id => (object, st, ts),
+                        _ => {
+                            let st = &self.chunks[(id >> CHUNK_SHIFT) as usize].shade[(id & ((1 << CHUNK_SHIFT) - 1)) as usize];
+                            let t = self.prepared.triangles[st.triangle as usize];
+                            let object = self.prepared.meshes[t.mesh as usize].object;
+                            let ts = self.prepared.triangle_surface(t);
+                            cached = Some((id, object, st, ts));
+                            (object, st, ts)
+                        }
+                    };
+                    out.write(i, object, depth[i], &shade(st, &ts, x, y));
                     if self.clear {
                         out.mask[i] = 0.0;
                     }
@@ -755,24 +766,21 @@ impl BandContext<'_, '_> {
             }
         }
     }
+}
 
-    /// The surface of the winning triangle at pixel (x, y), with its object id.
-    fn shade(&self, st: &ShadeTri, x: u32, y: u32) -> (u32, Surface) {
-        let p = self.prepared;
-        let t = p.triangles[st.triangle as usize];
-        let mesh = &p.meshes[t.mesh as usize];
-        let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-        // Covered pixels lie inside the snapped triangle; clamp the tiny overshoot of snapping.
-        let b = st.bary(px, py).map_or(Vec3::splat(1.0 / 3.0), |b| {
-            let b = b.max(Vec3::ZERO);
-            let s = b.x + b.y + b.z;
-            if s > 0.0 { b / s } else { Vec3::splat(1.0 / 3.0) }
-        });
-        let footprint = if mesh.uvs.is_empty() || !has_texture(&p.scene.materials[mesh.material]) {
-            0.0
-        } else {
-            let [i0, i1, i2] = mesh.indices[t.triangle as usize].map(|i| i as usize);
-            let uv = |b: Vec3| mesh.uvs[i0] * b.x + mesh.uvs[i1] * b.y + mesh.uvs[i2] * b.z;
+/// The surface of the winning triangle at pixel (x, y).
+#[inline]
+fn shade(st: &ShadeTri, ts: &TriangleSurface<'_>, x: u32, y: u32) -> Surface {
+    let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+    // Covered pixels lie inside the snapped triangle; clamp the tiny overshoot of snapping.
+    let b = st.bary(px, py).map_or(Vec3::splat(1.0 / 3.0), |b| {
+        let b = b.max(Vec3::ZERO);
+        let s = b.x + b.y + b.z;
+        if s > 0.0 { b / s } else { Vec3::splat(1.0 / 3.0) }
+    });
+    let footprint = match ts.uvs() {
+        Some([u0, u1, u2]) if ts.uses_footprint() => {
+            let uv = |b: Vec3| u0 * b.x + u1 * b.y + u2 * b.z;
             let at = uv(b);
             // Screen derivatives of the UV: the same planes one pixel right and one pixel down.
             let dx = st.bary(px + 1.0, py).map(|b| uv(b).distance(at));
@@ -783,18 +791,10 @@ impl BandContext<'_, '_> {
                 (None, None) => 0.0,
             };
             if f.is_finite() { f } else { 0.0 }
-        };
-        (mesh.object, p.surface_at(t, b, footprint))
-    }
-}
-
-fn has_texture(m: &hybrid_scene::Material) -> bool {
-    m.emission_map.is_some()
-        || m.ambient_map.is_some()
-        || m.diffuse_map.is_some()
-        || m.specular_map.is_some()
-        || m.normal_map.is_some()
-        || m.optical_map.is_some()
+        }
+        _ => 0.0,
+    };
+    ts.at(b, footprint)
 }
 
 #[cfg(test)]
