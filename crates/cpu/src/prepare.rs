@@ -246,15 +246,19 @@ pub fn sample_texture(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
     if f <= 1e-4 { a } else { a.lerp(bilinear(t, uv, l0 as usize + 1), f) }
 }
 
-/// `x.floor()` for every finite `x` (and ±∞, NaN), except that −0 becomes +0 (which no caller
-/// below can tell apart), without a library call on targets lacking SSE4.1.
+/// `x.floor()`, bit for bit (signed zeros included), without a library call or a saturating
+/// integer cast on targets lacking SSE4.1.
 #[inline(always)]
 fn floor(x: f32) -> f32 {
-    if x.abs() < 8_388_608.0 {
-        let t = x as i32 as f32;
-        if t > x { t - 1.0 } else { t }
+    const BIG: f32 = 8_388_608.0; // 2²³: every float at or above it is an integer
+    let a = x.abs();
+    if a < BIG {
+        // Round |x| to an integer (adding and removing 2²³), give it x's sign, and step down
+        // where that rounded up.
+        let r = ((a + BIG) - BIG).copysign(x);
+        if r > x { r - 1.0 } else { r }
     } else {
-        // |x| ≥ 2²³ is already integral (or not finite).
+        // Integral, infinite or NaN: floor is the identity.
         x
     }
 }
@@ -277,20 +281,14 @@ fn bilinear(t: &Texture, uv: Vec2, level: usize) -> Vec4 {
     let y = (uv.y - floor(uv.y)) * l.height as f32 - 0.5;
     let (x0, y0) = (floor(x), floor(y));
     let (fx, fy) = (x - x0, y - y0);
-    let wrap = |i: i64, n: u32| -> u32 {
-        let n = n as i64;
-        (if i < 0 {
-            i + n
-        } else if i >= n {
-            i - n
-        } else {
-            i
-        })
-        .clamp(0, n - 1) as u32
-    };
-    let (ix0, iy0) = (wrap(x0 as i64, l.width), wrap(y0 as i64, l.height));
-    let (ix1, iy1) = (wrap(x0 as i64 + 1, l.width), wrap(y0 as i64 + 1, l.height));
-    let (r0, r1) = ((iy0 * l.width) as usize, (iy1 * l.width) as usize);
+    // With a finite UV the fraction is in [0, 1], so x0 ∈ [−1, width − 1] (y0 likewise): the
+    // texture's repeat wrap reduces to these two cases (the `min` only guards the impossible).
+    let wrap0 = |i: i32, n: u32| if i < 0 { n - 1 } else { (i as u32).min(n - 1) };
+    let wrap1 = |i: i32, n: u32| if i + 1 >= n as i32 { 0 } else { (i + 1).max(0) as u32 };
+    let (xi, yi) = (x0 as i32, y0 as i32);
+    let (ix0, iy0) = (wrap0(xi, l.width), wrap0(yi, l.height));
+    let (ix1, iy1) = (wrap1(xi, l.width), wrap1(yi, l.height));
+    let (r0, r1) = (iy0 as usize * l.width as usize, iy1 as usize * l.width as usize);
     let (Some(&t00), Some(&t10), Some(&t01), Some(&t11)) = (
         l.texels.get(r0 + ix0 as usize),
         l.texels.get(r0 + ix1 as usize),
@@ -354,8 +352,14 @@ mod tests {
                 assert_eq!(want.to_array().map(f32::to_bits), got.to_array().map(f32::to_bits), "uv {uv} footprint {footprint} {cs:?}");
             }
         }
-        for x in [-2.5f32, -1.0, -0.5, -0.0, 0.0, 0.3, 1.0, 2.7, 8_388_607.5, -8_388_607.5, 1e10, -1e10] {
-            assert_eq!(floor(x), x.floor(), "floor {x}");
+        for x in [-2.5f32, -3.5, 2.5, 3.5, -1.0, -0.5, -0.7, -0.0, 0.0, 0.3, 1.0, 2.7, 8_388_607.5, -8_388_607.5, 4_194_303.7, 1e10, -1e10]
+        {
+            assert_eq!(floor(x).to_bits(), x.floor().to_bits(), "floor {x}");
+        }
+        let mut rng = Rng(99);
+        for _ in 0..100_000 {
+            let x = (rng.f() - 0.5) * 2f32.powi((rng.f() * 30.0) as i32 - 5);
+            assert_eq!(floor(x).to_bits(), x.floor().to_bits(), "floor {x}");
         }
     }
 }

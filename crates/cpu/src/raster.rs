@@ -284,6 +284,7 @@ impl ShadeTri {
 }
 
 /// One setup task's output: its screen triangles in scene order and their band bins.
+#[derive(Default)]
 struct Chunk {
     raster: Vec<RasterTri>,
     shade: Vec<ShadeTri>,
@@ -304,16 +305,29 @@ struct ClipVert {
     c: Vec4,
 }
 
-fn setup_chunk(first: usize, prepared: &PreparedScene, verts: &[Vec<PVert>], vpt: &Viewport, bands: usize) -> Chunk {
+/// Fills `chunk` (its vectors reused from frame to frame) with the screen triangles of scene
+/// triangles `first..first + SETUP_CHUNK` and their band bins.
+fn setup_chunk(
+    chunk: &mut Chunk,
+    first: usize,
+    prepared: &PreparedScene,
+    verts: &[PVert],
+    mesh_base: &[usize],
+    vpt: &Viewport,
+    bands: usize,
+) {
     let end = (first + SETUP_CHUNK).min(prepared.triangles.len());
+    let Chunk { raster, shade, band_start, entries } = chunk;
+    raster.clear();
+    shade.clear();
     // Sized for every triangle up front: no reallocation while filling.
-    let mut raster = Vec::with_capacity(end - first);
-    let mut shade = Vec::with_capacity(end - first);
+    raster.reserve(end - first);
+    shade.reserve(end - first);
     for (g, t) in prepared.triangles[first..end].iter().enumerate() {
         let g = (first + g) as u32;
         let mesh = &prepared.meshes[t.mesh as usize];
         let idx = mesh.indices[t.triangle as usize];
-        let mv = &verts[t.mesh as usize];
+        let mv = &verts[mesh_base[t.mesh as usize]..mesh_base[t.mesh as usize + 1]];
         let (Some(a), Some(b), Some(c)) = (mv.get(idx[0] as usize), mv.get(idx[1] as usize), mv.get(idx[2] as usize)) else {
             continue;
         };
@@ -348,24 +362,28 @@ fn setup_chunk(first: usize, prepared: &PreparedScene, verts: &[Vec<PVert>], vpt
         }
     }
     // Bin: counting sort by band, keeping scene order inside each band.
-    let mut band_start = vec![0u32; bands + 1];
-    for t in &raster {
+    band_start.clear();
+    band_start.resize(bands + 2, 0);
+    for t in raster.iter() {
         for b in (t.y0 / BAND_ROWS)..=(t.y1 / BAND_ROWS) {
-            band_start[b as usize + 1] += 1;
+            band_start[b as usize + 2] += 1;
         }
     }
     for b in 0..bands {
-        band_start[b + 1] += band_start[b];
+        band_start[b + 2] += band_start[b + 1];
     }
-    let mut fill = band_start.clone();
-    let mut entries = vec![0u32; band_start[bands] as usize];
+    // band_start[b + 1] is now where band b starts; filling advances it to where b ends, i.e.
+    // where b + 1 starts, which leaves band_start[b]..band_start[b + 1] = band b.
+    entries.clear();
+    entries.resize(band_start[bands + 1] as usize, 0);
     for (i, t) in raster.iter().enumerate() {
         for b in (t.y0 / BAND_ROWS)..=(t.y1 / BAND_ROWS) {
-            entries[fill[b as usize] as usize] = i as u32;
-            fill[b as usize] += 1;
+            let f = &mut band_start[b as usize + 1];
+            entries[*f as usize] = i as u32;
+            *f += 1;
         }
     }
-    Chunk { raster, shade, band_start, entries }
+    band_start.truncate(bands + 1);
 }
 
 /// Sutherland–Hodgman clipping of a triangle against the planes named in `code` (near first,
@@ -526,10 +544,11 @@ impl Edges {
     }
 }
 
-/// Calls `hit(x, y, covered)` for every pixel centre of the bounding box of `t` in rows `rows`;
-/// `covered` by the top-left rule. (Every box pixel, so callers can update branch-free.)
-#[inline]
-fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnMut(u32, u32, bool)) {
+/// Walks the rows `rows` of the bounding box of `t`: calls `row(y, e, step)` with the three edge
+/// values at the centre of pixel (x0, y) and their change per pixel in x. A pixel centre is
+/// covered by the top-left rule when all three are ≥ 0.
+#[inline(always)]
+fn walk_rows(t: &RasterTri, rows: std::ops::Range<u32>, mut row: impl FnMut(u32, [i64; 3], [i64; 3])) {
     let y_start = t.y0.max(rows.start);
     let y_end = (t.y1 + 1).min(rows.end);
     if y_start >= y_end {
@@ -537,19 +556,54 @@ fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnM
     }
     let e = Edges::new(t.v);
     let step = [e.a[0] * SUB, e.a[1] * SUB, e.a[2] * SUB];
-    let mut row = e.at(t.x0, y_start);
+    let mut at = e.at(t.x0, y_start);
     for y in y_start..y_end {
-        let [mut e0, mut e1, mut e2] = row;
+        row(y, at, step);
+        for (r, b) in at.iter_mut().zip(e.b) {
+            *r += b * SUB;
+        }
+    }
+}
+
+/// Calls `hit(x, y, covered)` for every pixel centre of the bounding box of `t` in rows `rows`;
+/// `covered` by the top-left rule. (Every box pixel, so callers can update branch-free.)
+#[inline]
+#[cfg_attr(not(test), allow(dead_code))]
+fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnMut(u32, u32, bool)) {
+    walk_rows(t, rows, |y, [mut e0, mut e1, mut e2], step| {
         for x in t.x0..=t.x1 {
             hit(x, y, (e0 | e1 | e2) >= 0);
             e0 += step[0];
             e1 += step[1];
             e2 += step[2];
         }
-        for (r, b) in row.iter_mut().zip(e.b) {
-            *r += b * SUB;
+    });
+}
+
+/// Depth test of `t` (visibility id `id`) against a band's visibility buffer (`depth`, `ids`:
+/// rows `y_lo..y_hi`, `w` pixels each): covered pixels (as [`for_each_covered`]) where the
+/// triangle's depth is Greater take its depth and id.
+#[inline]
+fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mut [f32], ids: &mut [u32]) {
+    let (z0, dzdx, dzdy) = (t.z0, t.dzdx, t.dzdy);
+    let (xa, xb) = (t.x0 as usize, t.x1 as usize);
+    walk_rows(t, y_lo..y_hi, |y, [mut e0, mut e1, mut e2], step| {
+        let base = (y - y_lo) as usize * w;
+        let (Some(drow), Some(irow)) = (depth.get_mut(base + xa..=base + xb), ids.get_mut(base + xa..=base + xb)) else {
+            return;
+        };
+        // Same sum, in the same order, as z0 + dzdx·(x − x0) + dzdy·(y − y0).
+        let zy = dzdy * (y - t.y0) as f32;
+        for (k, (d, o)) in drow.iter_mut().zip(irow.iter_mut()).enumerate() {
+            let z = (z0 + dzdx * k as f32 + zy).min(1.0);
+            let win = ((e0 | e1 | e2) >= 0) & (z > *d);
+            *d = if win { z } else { *d };
+            *o = if win { id } else { *o };
+            e0 += step[0];
+            e1 += step[1];
+            e2 += step[2];
         }
-    }
+    });
 }
 
 /// One band's rows of every G-buffer target (the band's slices of the frame's vectors).
@@ -568,7 +622,7 @@ struct BandRows<'a> {
 
 impl BandRows<'_> {
     /// Exactly what [`GBuffer::write`] does, for a band's slices (a test checks they agree).
-    #[inline]
+    #[inline(always)]
     fn write(&mut self, i: usize, object_id: u32, depth: f32, s: &Surface) {
         self.position[i] = s.position;
         self.normal[i] = s.normal;
@@ -652,29 +706,76 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
         gy: 1.0 + 2.0 * GUARD_PX / height as f32,
     };
 
-    // Pass 1: vertices.
-    let verts: Vec<Vec<PVert>> =
-        prepared.meshes.par_iter().map(|m| m.positions.par_iter().with_min_len(4096).map(|p| vpt.vertex(*p)).collect()).collect();
+    // Per-frame scratch (vertices, setup chunks) kept by the calling thread between frames, so
+    // a frame allocates (and page-faults) nothing but what it outputs.
+    let mut scratch = SCRATCH.with(|s| std::mem::take(&mut *s.borrow_mut()));
+    let Scratch { verts, mesh_base, chunks } = &mut scratch;
+
+    // Pass 1: vertices, once per vertex, in parallel over fixed slices.
+    mesh_base.clear();
+    mesh_base.push(0);
+    for m in &prepared.meshes {
+        mesh_base.push(mesh_base[mesh_base.len() - 1] + m.positions.len());
+    }
+    verts.resize(mesh_base[mesh_base.len() - 1], PVert::default());
+    let mut slices = Vec::with_capacity(prepared.meshes.len());
+    let mut rest = verts.as_mut_slice();
+    for m in &prepared.meshes {
+        let (mine, tail) = rest.split_at_mut(m.positions.len());
+        slices.push(mine);
+        rest = tail;
+    }
+    slices.into_par_iter().zip(&prepared.meshes).for_each(|(out, m)| {
+        out.par_chunks_mut(VERTEX_CHUNK).zip(m.positions.par_chunks(VERTEX_CHUNK)).for_each(|(o, p)| {
+            for (o, p) in o.iter_mut().zip(p) {
+                *o = vpt.vertex(*p);
+            }
+        });
+    });
 
     // Pass 2: setup and binning, in fixed chunks of the scene's triangle order.
     let bands = height.div_ceil(BAND_ROWS) as usize;
-    let chunk_starts: Vec<usize> = (0..prepared.triangles.len()).step_by(SETUP_CHUNK).collect();
-    let chunks: Vec<Chunk> = chunk_starts.par_iter().map(|&first| setup_chunk(first, prepared, &verts, &vpt, bands)).collect();
-    if chunks.len() >= (VIS_RT >> CHUNK_SHIFT) as usize {
+    let n_chunks = prepared.triangles.len().div_ceil(SETUP_CHUNK);
+    if n_chunks >= (VIS_RT >> CHUNK_SHIFT) as usize {
         tracing::error!(triangles = prepared.triangles.len(), "too many triangles for the rasteriser's visibility ids");
         return;
     }
+    chunks.truncate(n_chunks);
+    chunks.resize_with(n_chunks, Chunk::default);
+    let (verts, mesh_base) = (&*verts, &*mesh_base);
+    chunks.par_iter_mut().enumerate().with_max_len(1).for_each(|(k, chunk)| {
+        setup_chunk(chunk, k * SETUP_CHUNK, prepared, verts, mesh_base, &vpt, bands);
+    });
+    let chunks = &*chunks;
 
     // Pass 3: bands (visibility, then shading of the winners).
     let unproject = Unproject::new(camera, width, height);
     let w = width as usize;
     let band_len = w * BAND_ROWS as usize;
     let rows = split_bands(g, band_len);
-    let ctx = BandContext { prepared, chunks: &chunks, rt_layer, unproject: &unproject, width, height, clear };
+    let ctx = BandContext { prepared, chunks, rt_layer, unproject: &unproject, width, height, clear };
     rows.into_par_iter()
         .enumerate()
         .with_max_len(1)
         .for_each_init(|| (Vec::<f32>::new(), Vec::<u32>::new()), |(depth, ids), (band, mut out)| ctx.band(band, &mut out, depth, ids));
+    SCRATCH.with(|s| *s.borrow_mut() = scratch);
+}
+
+/// Vertices per task of the vertex pass.
+const VERTEX_CHUNK: usize = 4096;
+
+/// Per-frame buffers reused between frames (see [`SCRATCH`]).
+#[derive(Default)]
+struct Scratch {
+    /// Every mesh's vertices, mesh after mesh (`mesh_base[m]..mesh_base[m + 1]` = mesh m).
+    verts: Vec<PVert>,
+    mesh_base: Vec<usize>,
+    chunks: Vec<Chunk>,
+}
+
+thread_local! {
+    /// The calling thread's raster scratch (taken out for a frame, put back after it).
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 struct BandContext<'a, 's> {
@@ -714,17 +815,7 @@ impl BandContext<'_, '_> {
             let first = (ci as u32) << CHUNK_SHIFT;
             for &local in chunk.bin(band) {
                 let t = &chunk.raster[local as usize];
-                let id = first + local;
-                let (z0, dzdx, dzdy) = (t.z0, t.dzdx, t.dzdy);
-                let (rx, ry) = (t.x0, t.y0);
-                for_each_covered(t, y_lo..y_hi, |x, y, covered| {
-                    let z = (z0 + dzdx * (x - rx) as f32 + dzdy * (y - ry) as f32).min(1.0);
-                    let i = (y - y_lo) as usize * w + x as usize;
-                    let (d, o) = (depth[i], ids[i]);
-                    let win = covered & (z > d);
-                    depth[i] = if win { z } else { d };
-                    ids[i] = if win { id } else { o };
-                });
+                depth_test(t, first + local, y_lo, y_hi, w, depth, ids);
             }
         }
 
@@ -892,6 +983,41 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 50, "too few convex quads generated: {checked}");
+    }
+
+    #[test]
+    fn depth_test_covers_what_for_each_covered_covers() {
+        let (w, h) = (40u32, 37u32);
+        let v = vpt(w, h);
+        let mut rng = Rng(0x5151_7a7a_0102_0304);
+        let mut drawn = 0;
+        for n in 0..300u32 {
+            let tri = [0, 1, 2].map(|_| [rng.coord(w as i32), rng.coord(h as i32)]);
+            let Some(mut rt) = coverage(tri, &v) else { continue };
+            rt.z0 = 0.5;
+            rt.dzdx = 0.001;
+            rt.dzdy = -0.002;
+            let mut want = vec![false; (w * h) as usize];
+            for_each_covered(&rt, 0..h, |x, y, c| want[(y * w + x) as usize] |= c);
+            // Bands of 16 rows, as the rasteriser runs them (the last one shorter).
+            for y_lo in (0..h).step_by(BAND_ROWS as usize) {
+                let y_hi = (y_lo + BAND_ROWS).min(h);
+                let len = ((y_hi - y_lo) * w) as usize;
+                let (mut depth, mut ids) = (vec![0.0f32; len], vec![VIS_NONE; len]);
+                depth_test(&rt, n, y_lo, y_hi, w as usize, &mut depth, &mut ids);
+                for i in 0..len {
+                    let (x, y) = (i as u32 % w, y_lo + i as u32 / w);
+                    let covered = want[(y * w + x) as usize];
+                    assert_eq!(ids[i] == n, covered, "pixel ({x}, {y}) of {tri:?}");
+                    if covered {
+                        let z = (0.5 + 0.001 * (x - rt.x0) as f32 + -0.002 * (y - rt.y0) as f32).min(1.0);
+                        assert_eq!(depth[i].to_bits(), z.to_bits());
+                        drawn += 1;
+                    }
+                }
+            }
+        }
+        assert!(drawn > 1000, "too few pixels drawn: {drawn}");
     }
 
     #[test]
