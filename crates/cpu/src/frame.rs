@@ -233,7 +233,7 @@ impl<'s> CpuRenderer<'s> {
                 rays: Default::default(),
             };
         }
-        trace::trace(&self.prepared, &self.bvh, gbuffer, camera)
+        trace::trace_with_spheres(&self.prepared, &self.bvh, self.capsule.as_ref(), gbuffer, camera)
     }
 }
 

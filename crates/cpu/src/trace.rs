@@ -33,6 +33,7 @@ use hybrid_scene::{Camera, Projection};
 use rayon::prelude::*;
 
 use crate::bvh::SceneBvh;
+use crate::capsule::PointCloudCapsule;
 use crate::prepare::PreparedScene;
 
 /// Rays traced by a frame, by kind.
@@ -81,11 +82,24 @@ const CHUNK: usize = 64;
 
 /// Listing 8a over every pixel of `gbuffer` whose mask is > 0.
 pub fn trace(prepared: &PreparedScene, bvh: &SceneBvh, gbuffer: &GBuffer, camera: &Camera) -> TraceOutput {
+    trace_with_spheres(prepared, bvh, None, gbuffer, camera)
+}
+
+/// [`trace`] with the RT-scene's spheres as geometry too (beyond paper 2): they block shadow
+/// rays (opaque casters) and are seen, shaded as the capsule shades them, by reflection and
+/// refraction rays.
+pub fn trace_with_spheres(
+    prepared: &PreparedScene,
+    bvh: &SceneBvh,
+    spheres: Option<&PointCloudCapsule>,
+    gbuffer: &GBuffer,
+    camera: &Camera,
+) -> TraceOutput {
     let n = gbuffer.len();
     let mut shadow = vec![Vec3::ONE; n];
     let mut reflection = vec![Vec3::ZERO; n];
     let mut refraction = vec![Vec3::ZERO; n];
-    let tracer = Tracer { prepared, bvh, camera, primary: PrimaryRays::new(camera, gbuffer.width, gbuffer.height) };
+    let tracer = Tracer { prepared, bvh, spheres, camera, primary: PrimaryRays::new(camera, gbuffer.width, gbuffer.height) };
     let rays = shadow
         .par_chunks_mut(CHUNK)
         .zip(reflection.par_chunks_mut(CHUNK))
@@ -118,6 +132,7 @@ enum Kind {
 struct Tracer<'a, 's> {
     prepared: &'a PreparedScene<'s>,
     bvh: &'a SceneBvh,
+    spheres: Option<&'a PointCloudCapsule>,
     camera: &'a Camera,
     primary: PrimaryRays,
 }
@@ -151,7 +166,11 @@ impl Tracer<'_, '_> {
             }
             let (dir, dist) = light.direction_from(s.position);
             rays.shadow += 1;
-            let att = self.bvh.any_hit_attenuation(self.prepared, self.offset(&s, dir), dir, dist);
+            let origin = self.offset(&s, dir);
+            let mut att = self.bvh.any_hit_attenuation(self.prepared, origin, dir, dist);
+            if att > 0.0 && self.spheres.is_some_and(|c| c.occluded(origin, dir, 0.0, dist)) {
+                att = 0.0;
+            }
             shadow -= contribution * (1.0 - att);
         }
 
@@ -189,10 +208,13 @@ impl Tracer<'_, '_> {
             Kind::Refraction => rays.refraction += 1,
         }
         let scene = self.prepared.scene;
-        let Some(hit) = self.bvh.closest_hit(origin, dir, 0.0, f32::INFINITY) else {
-            return sky(&scene.environment, &scene.textures, dir);
+        let triangle = self.bvh.closest_hit(origin, dir, 0.0, f32::INFINITY);
+        let sphere = self.spheres.and_then(|c| c.closest_surface(origin, dir, 0.0, triangle.map_or(f32::INFINITY, |h| h.t)));
+        let s = match (sphere, triangle) {
+            (Some((_, s)), _) => s,
+            (None, Some(hit)) => self.prepared.surface_at(hit.triangle, hit.bary, 0.0),
+            (None, None) => return sky(&scene.environment, &scene.textures, dir),
         };
-        let s = self.prepared.surface_at(hit.triangle, hit.bary, 0.0);
         let settings = &scene.trace;
         let max_depth = settings.max_depth.min(MAX_TRACE_DEPTH);
         let reflectivity = s.reflectivity;

@@ -91,3 +91,23 @@ fn clipping_capsule_rays_at_the_raster_depth_changes_nothing_visible() {
     let hits = |f: &Frame| f.rt_packed.as_ref().unwrap().texels.iter().filter(|t| t[0] != 0 || t[1] != 0).count();
     assert!(hits(&clipped) < hits(&unclipped), "{} vs {}", hits(&clipped), hits(&unclipped));
 }
+
+#[test]
+fn spheres_cast_shadows_on_polygons_and_appear_in_reflections() {
+    let scene = tree_scene();
+    let mut renderer = CpuRenderer::new(&scene).unwrap();
+    let camera = scene.camera_path.as_ref().unwrap().camera_at(&scene.camera, 10.0);
+    let f = renderer.render(&camera, FrameSettings { width: 160, height: 90, mode: Mode::All }, &mut |_| {});
+    // The same G-buffer traced without the spheres.
+    let bvh = SceneBvh::build(renderer.prepared());
+    let without = hybrid_cpu::trace::trace(renderer.prepared(), &bvh, &f.gbuffer, &camera);
+    let n = f.gbuffer.len();
+    let darker = (0..n).filter(|&i| f.buffers.shadow[i].x < without.shadow[i].x - 1e-3).count();
+    let brighter = (0..n).filter(|&i| f.buffers.shadow[i].x > without.shadow[i].x + 1e-6).count();
+    eprintln!("{darker} pixels shadowed by spheres");
+    assert!(darker > n / 100, "spheres shadow only {darker} of {n} pixels");
+    assert_eq!(brighter, 0, "spheres can only block light");
+    let reflected = (0..n).filter(|&i| (f.buffers.reflection[i] - without.reflection[i]).abs().max_element() > 1e-3).count();
+    eprintln!("{reflected} reflection pixels show spheres");
+    assert!(reflected > 0, "the mirror ball shows no sphere");
+}
