@@ -269,7 +269,9 @@ struct Machine {
     cpu_model: Option<String>,
     load_average_start: Option<[f64; 3]>,
     load_average_end: Option<[f64; 3]>,
-    git_commit: Option<String>,
+    /// `git rev-parse HEAD` of the scene's repository when the bench ran (the binary may have been
+    /// built from another tree: record the build commit separately when it matters).
+    git_head: Option<String>,
 }
 
 fn cpu_model() -> Option<String> {
@@ -499,7 +501,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         cpu_model: cpu_model(),
         load_average_start: machine_start,
         load_average_end: load_average(),
-        git_commit: git_commit(args.scene.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."))),
+        git_head: git_commit(args.scene.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."))),
     };
     let budget_desc = match scene.heuristic.budget {
         Budget::Unlimited => json!(null),
@@ -568,10 +570,10 @@ fn frames_csv<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> String {
             t.heuristic,
             t.trace,
             t.blend,
-            opt(r.spent),
-            opt(r.budget),
+            opt(r.spent.map(|v| format!("{v:.1}"))),
+            opt(r.budget.map(|v| format!("{v:.1}"))),
             opt(r.budget_ms),
-            opt(r.all_cost),
+            opt(r.all_cost.map(|v| format!("{v:.1}"))),
             opt(r.visible),
             opt(r.selected),
             opt(r.churn),
@@ -672,7 +674,7 @@ fn markdown(
         machine.cpu_model.as_deref().unwrap_or("unknown CPU"),
         load(machine.load_average_start),
         load(machine.load_average_end),
-        machine.git_commit.as_ref().map_or(String::new(), |c| format!(", commit {}", &c[..c.len().min(10)]))
+        machine.git_head.as_ref().map_or(String::new(), |c| format!(", git HEAD {}", &c[..c.len().min(10)]))
     );
     let stages = |mode: &str| static_summary.get(mode).map(|v| v.stages);
     let _ = writeln!(s, "## Static set (Table 5), ms: mean (p95) over {} frames after {WARMUP_FRAMES} warm-up\n", args.frames);
@@ -752,6 +754,9 @@ fn markdown(
             }
             if let Some(r) = p.budget_hit_rate {
                 let _ = writeln!(s, "| Frames with RAYT within ±10% of budget_ms | {:.1}% |", 100.0 * r);
+            }
+            if let Some(r) = p.budget_over_rate {
+                let _ = writeln!(s, "| Frames with RAYT over budget_ms by > 10% | {:.1}% |", 100.0 * r);
             }
         }
         s.push('\n');
