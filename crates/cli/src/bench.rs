@@ -609,11 +609,12 @@ fn sweep_csv(points: &[SweepPoint]) -> String {
 fn frame_time_chart(name: &str, static_passes: &[(Mode, Pass)], path_passes: &[(Mode, Pass)], scene: &Scene) -> Chart<'static> {
     let on_path = !path_passes.is_empty();
     let passes = if on_path { path_passes } else { static_passes };
-    let series = passes
+    let x = |r: &FrameRecord| r.time_s.map_or(r.frame as f64, f64::from);
+    let mut series: Vec<Series> = passes
         .iter()
         .map(|(m, p)| Series {
             name: m.name().to_string(),
-            points: p.records.iter().map(|r| (r.time_s.map_or(r.frame as f64, f64::from), r.timings.frame)).collect(),
+            points: p.records.iter().map(|r| (x(r), r.timings.frame)).collect(),
             markers: p.records.len() < 40 || *m == Mode::RtOnly,
         })
         .collect();
@@ -621,10 +622,17 @@ fn frame_time_chart(name: &str, static_passes: &[(Mode, Pass)], path_passes: &[(
         Budget::Millis(ms) => Some(HLine { name: format!("trace budget {ms} ms"), y: ms }),
         _ => None,
     };
+    // With a millisecond budget, the trace stage it controls, next to its target line.
+    if hline.is_some()
+        && let Some((_, p)) = passes.iter().find(|(m, _)| *m == Mode::Hybrid)
+    {
+        let points = p.records.iter().map(|r| (x(r), r.timings.trace)).collect();
+        series.push(Series { name: "hybrid trace stage (RAYT)".into(), points, markers: p.records.len() < 40 });
+    }
     Chart {
         title: format!("{name}: frame time {}", if on_path { "along the camera path" } else { "at the static camera" }),
         x_label: if on_path { "path time (s)" } else { "frame" },
-        y_label: "frame time (ms)",
+        y_label: "time (ms)",
         series,
         hline,
     }
