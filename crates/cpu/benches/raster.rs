@@ -6,7 +6,8 @@
 //!
 //! CPU-time mode (for before/after comparisons on a loaded machine): `RASTER_CPU=20 cargo bench
 //! -p hybrid-cpu --bench raster` runs each pass 20 times on a 1-thread rayon pool and prints the
-//! process CPU time per frame (from `/proc/self/stat`), plus checksums of the outputs.
+//! process CPU time per frame (from `/proc/self/stat`), plus checksums of the outputs
+//! (`RASTER_THREADS=2` for a 2-thread pool).
 
 use criterion::{Criterion, criterion_group};
 use glam::{Vec2, Vec3};
@@ -162,7 +163,8 @@ fn checksum<T: Copy>(v: &[T], bits: impl Fn(T) -> Vec<u32>) -> u64 {
 fn cpu_mode(iters: u32) {
     let (scene, camera) = bench_scene();
     let prepared = PreparedScene::new(&scene);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let threads = std::env::var("RASTER_THREADS").ok().and_then(|v| v.parse::<usize>().ok()).unwrap_or(1);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
     let mut g = GBuffer::new(W, H);
     pool.install(|| rasterize_into(&prepared, &camera, None, &mut g));
     let t0 = cpu_ms();
@@ -192,7 +194,7 @@ fn cpu_mode(iters: u32) {
         checksum(&g.depth, |x| vec![x.to_bits()]),
     ];
     println!(
-        "1 thread, {iters} iterations: rasterize_into {raster_cpu:.1} ms CPU ({raster_wall:.1} wall), deferred_lighting {light_cpu:.1} ms CPU ({light_wall:.1} wall)"
+        "{threads} thread(s), {iters} iterations: rasterize_into {raster_cpu:.1} ms CPU ({raster_wall:.1} wall), deferred_lighting {light_cpu:.1} ms CPU ({light_wall:.1} wall)"
     );
     println!("gbuffer checksums {gsum:016x?}");
     println!("lighting checksum {:016x}", checksum(&lit, v3));

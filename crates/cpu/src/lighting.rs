@@ -119,8 +119,8 @@ pub fn deferred_lighting(gbuffer: &GBuffer, scene: &Scene, camera: &Camera) -> V
         );
         for (k, px) in rows.iter_mut().enumerate() {
             *px = if ids[k] == NO_OBJECT {
-                let i = base + k;
-                sky(env, &scene.textures, rays.ray((i % w) as u32, (i / w) as u32).1)
+                let (x, y) = (k % w, band * LIGHTING_ROWS + k / w);
+                sky(env, &scene.textures, rays.ray(x as u32, y as u32).1)
             } else {
                 let (d, s) = (dif[k], spe[k]);
                 // The fields lighting reads, exactly as `GBuffer::surface` gives them.

@@ -263,10 +263,13 @@ fn floor(x: f32) -> f32 {
     }
 }
 
-/// 256-entry sRGB → linear table, the same values `Texture::texel` uses.
-fn srgb_table() -> &'static [f32; 256] {
-    static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
-    LUT.get_or_init(|| std::array::from_fn(|i| hybrid_scene::texture::srgb_to_linear(i as f32 / 255.0)))
+/// 256-entry tables: sRGB → linear (the same values `Texture::texel` uses) and `i / 255` (the
+/// linear decode, the same division done once per value instead of per texel).
+fn decode_tables() -> &'static ([f32; 256], [f32; 256]) {
+    static LUT: std::sync::OnceLock<([f32; 256], [f32; 256])> = std::sync::OnceLock::new();
+    LUT.get_or_init(|| {
+        (std::array::from_fn(|i| hybrid_scene::texture::srgb_to_linear(i as f32 / 255.0)), std::array::from_fn(|i| i as f32 / 255.0))
+    })
 }
 
 /// `Texture::sample_bilinear`, same arithmetic in the same order.
@@ -298,12 +301,13 @@ fn bilinear(t: &Texture, uv: Vec2, level: usize) -> Vec4 {
         return t.sample_bilinear(uv, level);
     };
     let srgb = t.color_space == ColorSpace::Srgb;
-    let lut = srgb_table();
+    let (lut, unorm) = decode_tables();
     let decode = |p: [u8; 4]| -> Vec4 {
+        let a = unorm[p[3] as usize];
         if srgb {
-            Vec4::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize], p[3] as f32 / 255.0)
+            Vec4::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize], a)
         } else {
-            Vec4::new(p[0] as f32, p[1] as f32, p[2] as f32, p[3] as f32) / 255.0
+            Vec4::new(unorm[p[0] as usize], unorm[p[1] as usize], unorm[p[2] as usize], a)
         }
     };
     let a = decode(t00).lerp(decode(t10), fx);

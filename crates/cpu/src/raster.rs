@@ -230,7 +230,7 @@ impl Viewport {
         let inv_w = 1.0 / c.w;
         let sx = (c.x * inv_w * 0.5 + 0.5) * self.width as f32;
         let sy = (0.5 - c.y * inv_w * 0.5) * self.height as f32;
-        ((sx * SUB as f32).round() as i32, (sy * SUB as f32).round() as i32)
+        (round_to_i32(sx * SUB as f32), round_to_i32(sy * SUB as f32))
     }
 
     fn vertex(&self, p: Vec3) -> PVert {
@@ -238,6 +238,22 @@ impl Viewport {
         let code = self.outcode(clip);
         let (fx, fy) = if code & (CLIP | INVALID) == 0 { self.snap(clip) } else { (0, 0) };
         PVert { clip, fx, fy, code }
+    }
+}
+
+/// `x.round() as i32` (half away from zero, saturating, NaN → 0) without the library `roundf`
+/// call of targets lacking SSE4.1.
+#[inline(always)]
+fn round_to_i32(x: f32) -> i32 {
+    let t = x as i32; // truncated (saturating)
+    // Exact where it matters (|x| < 2²³); beyond, x is integral or t saturated.
+    let frac = x - t as f32;
+    if frac >= 0.5 {
+        t.saturating_add(1)
+    } else if frac <= -0.5 {
+        t.saturating_sub(1)
+    } else {
+        t
     }
 }
 
@@ -822,8 +838,16 @@ impl BandContext<'_, '_> {
         // Shading of the winners. Consecutive pixels mostly share their winner: its corner
         // attributes and material are gathered once per run.
         let mut cached: Option<(u32, u32, &ShadeTri, TriangleSurface<'_>)> = None;
+        let (mut x, mut y) = (0u32, y_lo);
         for i in 0..len {
-            let (x, y) = ((i % w) as u32, y_lo + (i / w) as u32);
+            // (x, y) of pixel i, stepped (no division per pixel).
+            if i > 0 {
+                x += 1;
+                if x == self.width {
+                    x = 0;
+                    y += 1;
+                }
+            }
             match ids[i] {
                 VIS_NONE => {
                     if self.clear {
@@ -1018,6 +1042,20 @@ mod tests {
             }
         }
         assert!(drawn > 1000, "too few pixels drawn: {drawn}");
+    }
+
+    #[test]
+    fn round_to_i32_matches_round() {
+        let mut rng = Rng(0xdead_beef_1234_5678);
+        let special =
+            [0.5f32, -0.5, 1.5, -1.5, 2.5, 0.499_999_97, -0.499_999_97, 8_388_607.5, -8_388_607.5, 1e10, -1e10, 0.0, -0.0, f32::NAN];
+        for x in special {
+            assert_eq!(round_to_i32(x), x.round() as i32, "{x}");
+        }
+        for _ in 0..200_000 {
+            let x = f32::from_bits(rng.next() as u32);
+            assert_eq!(round_to_i32(x), x.round() as i32, "{x}");
+        }
     }
 
     #[test]
