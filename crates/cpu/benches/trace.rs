@@ -254,7 +254,7 @@ fn load_average() -> String {
 
 /// Best CPU time (1-thread pool) and best wall time (global pool) of `f` over a few passes.
 fn measure(one: &rayon::ThreadPool, mut f: impl FnMut() + Send) -> (f64, f64) {
-    let passes = 5;
+    let passes = std::env::var("TRACE_PASSES").ok().and_then(|p| p.parse().ok()).unwrap_or(5);
     let mut cpu = f64::INFINITY;
     for _ in 0..passes {
         cpu = cpu.min(one.install(|| {
@@ -288,7 +288,11 @@ fn report(name: &str, what: &str, items: usize, unit: &str, (cpu, wall): (f64, f
 fn cpu_time_report() {
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("1-thread pool");
     println!("threads in the global pool: {}", rayon::current_num_threads());
+    let only = std::env::var("TRACE_SCENE").ok();
     for (name, mut scene, light) in scenes() {
+        if only.as_deref().is_some_and(|o| o != name) {
+            continue;
+        }
         scene.lights = Lights {
             point: vec![PointLight {
                 position: light,

@@ -23,7 +23,7 @@
 //! min/max/count partials, and the parallel halves build into separate subtrees that are
 //! collapsed in a fixed depth-first order.
 
-use glam::{IVec3, Vec3, Vec3A, Vec4};
+use glam::{Vec3, Vec3A, Vec4};
 use hybrid_scene::{Material, Texture};
 use rayon::prelude::*;
 
@@ -39,15 +39,15 @@ pub struct Hit {
     pub bary: Vec3,
 }
 
-/// A 4-wide node (SoA child boxes, tested together with 4-lane SIMD): `lo[axis]`/`hi[axis]`
-/// hold the four children's box minima/maxima on that axis. `child[k]` is an inner node index,
+/// A 4-wide node (SoA child boxes, tested together with 4-lane SIMD): `planes[axis]` /
+/// `planes[3 + axis]` hold the four children's box minima/maxima on that axis (one array, so a
+/// ray picks its entry and exit planes by precomputed index instead of a per-node select). `child[k]` is an inner node index,
 /// a leaf reference (`LEAF | first pack << LEAF_PACK_BITS | (packs − 1)`), or [`EMPTY_SLOT`]
 /// (its box is empty, so no ray enters it).
 #[derive(Debug, Clone, Copy)]
 #[repr(C, align(64))]
 struct Node4 {
-    lo: [Vec4; 3],
-    hi: [Vec4; 3],
+    planes: [Vec4; 6],
     child: [u32; 4],
 }
 
@@ -66,34 +66,48 @@ fn leaf_packs(c: u32) -> std::ops::Range<usize> {
 }
 
 impl Node4 {
-    const EMPTY: Node4 = Node4 { lo: [Vec4::INFINITY; 3], hi: [Vec4::NEG_INFINITY; 3], child: [EMPTY_SLOT; 4] };
+    const EMPTY: Node4 = Node4 {
+        planes: [Vec4::INFINITY, Vec4::INFINITY, Vec4::INFINITY, Vec4::NEG_INFINITY, Vec4::NEG_INFINITY, Vec4::NEG_INFINITY],
+        child: [EMPTY_SLOT; 4],
+    };
     fn set(&mut self, k: usize, b: &Bounds, child: u32) {
         for axis in 0..3 {
-            self.lo[axis][k] = b.min[axis];
-            self.hi[axis][k] = b.max[axis];
+            self.planes[axis][k] = b.min[axis];
+            self.planes[3 + axis][k] = b.max[axis];
         }
         self.child[k] = child;
     }
+    #[cfg(test)]
+    fn lo(&self, axis: usize) -> Vec4 {
+        self.planes[axis]
+    }
+    #[cfg(test)]
+    fn hi(&self, axis: usize) -> Vec4 {
+        self.planes[3 + axis]
+    }
 }
 
-/// A ray prepared for node tests: origin and inverse direction splatted per axis, and which
-/// box side is entered first on each axis.
+/// A ray prepared for node tests: origin and inverse direction splatted per axis, and the
+/// index in `Node4::planes` of the plane entered (`near`) and left (`far`) on each axis.
 struct RayPre {
     o: [Vec4; 3],
     d: [Vec4; 3],
     inv: [Vec4; 3],
-    neg: [bool; 3],
+    near: [usize; 3],
+    far: [usize; 3],
 }
 
 impl RayPre {
     #[inline(always)]
     fn new(o: Vec3A, d: Vec3A) -> Self {
         let inv = d.recip();
+        let neg = [inv.x < 0.0, inv.y < 0.0, inv.z < 0.0];
         Self {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             d: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
-            neg: [inv.x < 0.0, inv.y < 0.0, inv.z < 0.0],
+            near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+            far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
         }
     }
 }
@@ -105,9 +119,8 @@ fn node_hits(n: &Node4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, u32) {
     let mut near = Vec4::splat(t_min);
     let mut far = Vec4::splat(t_max);
     for axis in 0..3 {
-        let (a, b) = if r.neg[axis] { (n.hi[axis], n.lo[axis]) } else { (n.lo[axis], n.hi[axis]) };
-        near = near.max((a - r.o[axis]) * r.inv[axis]);
-        far = far.min((b - r.o[axis]) * r.inv[axis]);
+        near = near.max((n.planes[r.near[axis]] - r.o[axis]) * r.inv[axis]);
+        far = far.min((n.planes[r.far[axis]] - r.o[axis]) * r.inv[axis]);
     }
     (near, near.cmple(far).bitmask())
 }
@@ -154,8 +167,6 @@ const BINS: usize = 16;
 const MAX_LEAF: usize = 8;
 /// Nodes at this depth become leaves whatever their size, so traversal stacks stay bounded.
 const MAX_DEPTH: u32 = 56;
-/// Each 4-wide level pushes at most 3 entries (a leaf split under extra nodes adds a few levels).
-const STACK: usize = 3 * MAX_DEPTH as usize + 32;
 /// Subtrees larger than this are split in parallel.
 const PARALLEL_MIN: usize = 8192;
 /// Nodes larger than this are binned in parallel (chunks of this size).
@@ -437,14 +448,18 @@ impl SceneBvh {
         if self.nodes.is_empty() {
             return None;
         }
-        let o = Vec3A::from(origin);
-        let d = Vec3A::from(dir);
-        let r = RayPre::new(o, d);
+        HIT_STACK.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut stack) => self.closest_hit_with(&mut stack, origin, dir, t_min, t_max),
+            Err(_) => self.closest_hit_with(&mut Vec::new(), origin, dir, t_min, t_max),
+        })
+    }
+
+    fn closest_hit_with(&self, stack: &mut Vec<u64>, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
+        let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
         let mut best_t = t_max;
         let mut best = usize::MAX;
         let mut best_uv = (0.0f32, 0.0f32);
-        let mut stack = [(0u32, 0.0f32); STACK];
-        let mut sp = 0usize;
+        stack.clear();
         let mut cur = 0u32;
         loop {
             if cur & LEAF == 0 {
@@ -452,31 +467,30 @@ impl SceneBvh {
                 let (near, mask) = node_hits(n, &r, t_min, best_t);
                 if mask != 0 {
                     if mask & (mask - 1) == 0 {
-                        cur = n.child[mask.trailing_zeros() as usize];
+                        cur = n.child[mask.trailing_zeros() as usize & 3];
                         continue;
                     }
-                    // Several children: sort them by entry distance; visit the nearest, stack
-                    // the rest farthest first.
-                    let mut hits = [(0u32, 0.0f32); 4];
-                    let mut k = 0;
-                    let mut m = mask;
-                    while m != 0 {
-                        let c = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        let e = (n.child[c], near[c]);
-                        let mut j = k;
-                        while j > 0 && hits[j - 1].1 > e.1 {
-                            hits[j] = hits[j - 1];
-                            j -= 1;
-                        }
-                        hits[j] = e;
-                        k += 1;
-                    }
-                    for h in hits[1..k].iter().rev() {
-                        stack[sp] = *h;
-                        sp += 1;
-                    }
-                    cur = hits[0].0;
+                    // Several children: sort them by entry distance (farthest first) with a
+                    // branch-free sorting network on `distance bits << 32 | child` keys (entry
+                    // distances are ≥ t_min ≥ 0 for the rays we trace, so their bits order like
+                    // the floats; a wrong order would only cost time); stack all but the
+                    // nearest, visit that one.
+                    let near = near.to_array();
+                    let key = |c: usize| if mask >> c & 1 != 0 { (near[c].to_bits() as u64) << 32 | n.child[c] as u64 } else { 0 };
+                    let mut k = [key(0), key(1), key(2), key(3)];
+                    let mut swap = |a: usize, b: usize| {
+                        let (x, y) = (k[a], k[b]);
+                        k[a] = x.max(y);
+                        k[b] = x.min(y);
+                    };
+                    swap(0, 1);
+                    swap(2, 3);
+                    swap(0, 2);
+                    swap(1, 3);
+                    swap(1, 2);
+                    let hits = mask.count_ones() as usize;
+                    stack.extend_from_slice(&k[..hits - 1]);
+                    cur = k[(hits - 1) & 3] as u32;
                     continue;
                 }
             } else {
@@ -484,30 +498,31 @@ impl SceneBvh {
                 let first = range.start;
                 for (pi, pack) in self.packs[range].iter().enumerate() {
                     let (t, u, v, mut mask) = intersect4(pack, &r, t_min, best_t);
-                    while mask != 0 {
-                        let lane = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        if t[lane] < best_t {
-                            best_t = t[lane];
-                            best = (first + pi) * 4 + lane;
-                            best_uv = (u[lane], v[lane]);
+                    if mask != 0 {
+                        let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
+                        while mask != 0 {
+                            let lane = mask.trailing_zeros() as usize & 3;
+                            mask &= mask - 1;
+                            if t[lane] < best_t {
+                                best_t = t[lane];
+                                best = (first + pi) * 4 + lane;
+                                best_uv = (u[lane], v[lane]);
+                            }
                         }
                     }
                 }
             }
             // Pop the next entry that starts before the closest hit so far.
             loop {
-                if sp == 0 {
+                let Some(key) = stack.pop() else {
                     return (best != usize::MAX).then(|| Hit {
                         t: best_t,
                         triangle: self.slot_ref[best],
                         bary: Vec3::new(1.0 - best_uv.0 - best_uv.1, best_uv.0, best_uv.1),
                     });
-                }
-                sp -= 1;
-                let (c, entry) = stack[sp];
-                if entry <= best_t {
-                    cur = c;
+                };
+                if f32::from_bits((key >> 32) as u32) <= best_t {
+                    cur = key as u32;
                     break;
                 }
             }
@@ -538,7 +553,7 @@ impl SceneBvh {
                 return false;
             }
             while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
+                let lane = mask.trailing_zeros() as usize & 3;
                 mask &= mask - 1;
                 let tr = self.slot_shadow[slot0 + lane];
                 let tr = if tr == EVALUATE {
@@ -562,26 +577,38 @@ impl SceneBvh {
     /// bits 0–3 are the lanes hit (triangles that cast shadows, transparency < 1); bits 4–7
     /// are set instead (bits 0–3 clear) when one of the lanes hit is opaque.
     #[inline]
-    fn for_each_pack_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, mut f: impl FnMut(usize, u32, Vec4, Vec4) -> bool) {
+    fn for_each_pack_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, f: impl FnMut(usize, u32, [f32; 4], [f32; 4]) -> bool) {
         if self.nodes.is_empty() {
             return;
         }
-        let o = Vec3A::from(origin);
-        let d = Vec3A::from(dir);
-        let r = RayPre::new(o, d);
-        let mut stack = [0u32; STACK];
-        let mut sp = 0usize;
+        ANY_STACK.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut stack) => self.for_each_pack_hit_with(&mut stack, origin, dir, t_min, t_max, f),
+            Err(_) => self.for_each_pack_hit_with(&mut Vec::new(), origin, dir, t_min, t_max, f),
+        })
+    }
+
+    #[inline(always)]
+    fn for_each_pack_hit_with(
+        &self,
+        stack: &mut Vec<u32>,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        mut f: impl FnMut(usize, u32, [f32; 4], [f32; 4]) -> bool,
+    ) {
+        let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
+        stack.clear();
         let mut cur = 0u32;
         loop {
             if cur & LEAF == 0 {
                 let n = &self.nodes[cur as usize];
                 let (_, mut mask) = node_hits(n, &r, t_min, t_max);
                 if mask != 0 {
-                    cur = n.child[mask.trailing_zeros() as usize];
+                    cur = n.child[mask.trailing_zeros() as usize & 3];
                     mask &= mask - 1;
                     while mask != 0 {
-                        stack[sp] = n.child[mask.trailing_zeros() as usize];
-                        sp += 1;
+                        stack.push(n.child[mask.trailing_zeros() as usize & 3]);
                         mask &= mask - 1;
                     }
                     continue;
@@ -595,19 +622,25 @@ impl SceneBvh {
                     if hit != 0 {
                         let opaque = hit & (shadow as u32 >> 4);
                         let mask = if opaque != 0 { opaque << 4 } else { hit };
-                        if !f((first + k) * 4, mask, u, v) {
+                        if !f((first + k) * 4, mask, u.to_array(), v.to_array()) {
                             return;
                         }
                     }
                 }
             }
-            if sp == 0 {
-                return;
+            match stack.pop() {
+                Some(c) => cur = c,
+                None => return,
             }
-            sp -= 1;
-            cur = stack[sp];
         }
     }
+}
+
+thread_local! {
+    /// Per-thread traversal stacks, reused from ray to ray (a fixed-size array would be
+    /// zero-filled for every ray).
+    static HIT_STACK: std::cell::RefCell<Vec<u64>> = const { std::cell::RefCell::new(Vec::new()) };
+    static ANY_STACK: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Möller–Trumbore on four triangles: `(t, u, v, mask of lanes hit with t_min < t < t_max)`;
@@ -651,9 +684,8 @@ fn build_rec(prims: &mut [Prim], pb: PrimBounds, offset: u32, depth: u32) -> Bui
     let split = best_split(prims, &cb, &bounds, nb);
     let parts = match split {
         Some((axis, bin, cost)) if cost < packs_of(n) * INTERSECT_COST || n > MAX_LEAF => {
-            let scale = nb as f32 / (cb.max - cb.min)[axis];
-            let lo = cb.min[axis];
-            partition(prims, |p| bin_of(p.centroid2()[axis], lo, scale, nb) <= bin)
+            let scale = bin_scale(&cb, nb);
+            partition(prims, |p| bins_of(p.centroid2(), cb.min, scale, nb)[axis] <= bin)
         }
         Some(_) => return leaf,
         None => (0, PrimBounds::EMPTY, PrimBounds::EMPTY),
@@ -679,9 +711,21 @@ fn packs_of(n: usize) -> f32 {
     n.div_ceil(4) as f32
 }
 
-#[inline]
-fn bin_of(c: f32, lo: f32, scale: f32, nb: usize) -> usize {
-    (((c - lo) * scale) as usize).min(nb - 1)
+/// Bin of a centroid on each axis, in `0..nb` (`nb ≤ BINS`): `(c − lo) · scale` rounded down
+/// (rounded to nearest after − ½, with the 2²³ trick so the conversion stays in SIMD registers;
+/// the build uses this one function for binning and partitioning, so both agree exactly). NaN
+/// lands in bin 0.
+#[inline(always)]
+fn bins_of(c: Vec3A, lo: Vec3A, scale: Vec3A, nb: usize) -> [usize; 3] {
+    const MAGIC: f32 = 8_388_608.0;
+    let x = ((c - lo) * scale - Vec3A::splat(0.5)).clamp(Vec3A::ZERO, Vec3A::splat(nb as f32 - 1.0)) + Vec3A::splat(MAGIC);
+    x.to_array().map(|v| (v.to_bits() as usize) & (BINS - 1))
+}
+
+/// Bins per unit on each axis of a centroid box (0 on axes without a usable extent).
+fn bin_scale(cb: &Bounds, nb: usize) -> Vec3A {
+    let extent = cb.max - cb.min;
+    Vec3A::from_array([0, 1, 2].map(|a| if extent[a] > 0.0 && extent[a].is_finite() { nb as f32 / extent[a] } else { 0.0 }))
 }
 
 /// Per-axis bin boxes and counts.
@@ -707,8 +751,7 @@ impl Bins {
 fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
     let mut bins = Bins::EMPTY;
     for p in prims {
-        // Saturating float → int casts: NaN and negatives land in bin 0.
-        let b = ((p.centroid2() - lo) * scale).as_ivec3().clamp(IVec3::ZERO, IVec3::splat(nb as i32 - 1)).to_array().map(|x| x as usize);
+        let b = bins_of(p.centroid2(), lo, scale, nb);
         let pb = p.bounds();
         for ((bounds, counts), b) in bins.bounds.iter_mut().zip(&mut bins.counts).zip(b) {
             bounds[b].grow(&pb);
@@ -726,7 +769,7 @@ fn best_split(prims: &[Prim], cb: &Bounds, bounds: &Bounds, nb: usize) -> Option
     if !usable.iter().any(|&u| u) {
         return None;
     }
-    let scale = Vec3A::from_array([0, 1, 2].map(|a| if usable[a] { nb as f32 / extent[a] } else { 0.0 }));
+    let scale = bin_scale(cb, nb);
     let bins = if prims.len() >= PARALLEL_BIN_MIN {
         prims.par_chunks(PARALLEL_BIN_MIN / 2).map(|c| bin_prims(c, cb.min, scale, nb)).reduce(|| Bins::EMPTY, Bins::merge)
     } else {
@@ -961,7 +1004,7 @@ mod tests {
         assert_eq!(a.slot_ref, b.slot_ref);
         assert_eq!(a.nodes.len(), b.nodes.len());
         assert_eq!(a.leaf_count(), b.leaf_count());
-        let bits = |n: &Node4| (n.lo.map(|v| v.to_array().map(f32::to_bits)), n.hi.map(|v| v.to_array().map(f32::to_bits)), n.child);
+        let bits = |n: &Node4| (n.planes.map(|v| v.to_array().map(f32::to_bits)), n.child);
         assert!(a.nodes.iter().zip(&b.nodes).all(|(x, y)| bits(x) == bits(y)));
         // Every triangle is in exactly one leaf slot, every pack in exactly one leaf.
         let (seen, packs) = coverage(&a, &p.triangles);
@@ -1030,7 +1073,7 @@ mod tests {
                     // The child box holds the triangle.
                     for v in corners[t as usize] {
                         for axis in 0..3 {
-                            assert!(nodes[0].lo[axis][k] <= v[axis] && v[axis] <= nodes[0].hi[axis][k]);
+                            assert!(nodes[0].lo(axis)[k] <= v[axis] && v[axis] <= nodes[0].hi(axis)[k]);
                         }
                     }
                 }

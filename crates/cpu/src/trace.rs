@@ -19,7 +19,9 @@
 //!   `combine(lighting, refl, refr, r, τ)` (the eq. 5/6 average, = color1/color2 of 8c).
 //!
 //! Beyond the paper: a shadow ray whose light contributes nothing to the pixel (back-facing,
-//! outside a spot cone) is not traced, as it cannot change the result.
+//! outside a spot cone, zero radiance, a surface without diffuse and specular colour) is not
+//! traced, as it cannot change the result; the Blinn–Phong term is evaluated only for rays that
+//! find a blocker (attenuation < 1).
 //!
 //! Ray origins are offset by `scene.trace.ray_bias` along the normal, on the side the new ray
 //! leaves from (so refraction rays entering glass start inside it). Pixels are independent, so
@@ -27,7 +29,7 @@
 
 use glam::{DMat4, DVec3, Vec2, Vec3};
 use hybrid_core::blend::combine;
-use hybrid_core::shading::{lights, local_lighting, reflect, refract_or_reflect, sky};
+use hybrid_core::shading::{facing, lights, local_lighting, reflect, refract_or_reflect, sky};
 use hybrid_core::{GBuffer, Surface};
 use hybrid_scene::{Camera, Projection};
 use rayon::prelude::*;
@@ -156,12 +158,16 @@ impl Tracer<'_, '_> {
         let view = -incident;
 
         let mut shadow = Vec3::ONE;
+        let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
         for light in lights(&scene.lights) {
-            if !light.casts_shadows() {
+            if !light.casts_shadows() || unlit {
                 continue;
             }
-            let contribution = light.blinn_phong(&s, view);
-            if contribution == Vec3::ZERO {
+            // The cheap half of Blinn–Phong first (no radiance, or the light behind the
+            // surface: it contributes nothing, so no ray); the full term only where the ray
+            // finds a blocker.
+            let (l, radiance) = light.incident(s.position);
+            if radiance == Vec3::ZERO || facing(s.normal, view).dot(l) <= 0.0 {
                 continue;
             }
             let (dir, dist) = light.direction_from(s.position);
@@ -171,7 +177,9 @@ impl Tracer<'_, '_> {
             if att > 0.0 && self.spheres.is_some_and(|c| c.occluded(origin, dir, 0.0, dist)) {
                 att = 0.0;
             }
-            shadow -= contribution * (1.0 - att);
+            if att < 1.0 {
+                shadow -= light.blinn_phong(&s, view) * (1.0 - att);
+            }
         }
 
         let mut reflection = Vec3::ZERO;
