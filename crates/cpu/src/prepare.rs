@@ -331,6 +331,45 @@ mod tests {
     }
 
     #[test]
+    fn untextured_shortcut_matches_the_general_path_bit_for_bit() {
+        let mut scene = hybrid_scene::demo_scene();
+        // Vary the materials' constants (out-of-range values too: the clamps must agree).
+        for (k, m) in scene.materials.iter_mut().enumerate() {
+            m.emission = Vec3::new(0.1, 0.0, -0.0) * k as f32;
+            m.opacity = 1.5 - 0.4 * k as f32;
+            m.shininess = -0.2 + 0.3 * k as f32;
+            m.reflectivity = 0.7 * k as f32 - 0.5;
+            m.offset = Vec2::new(0.25, -0.5);
+        }
+        let prepared = PreparedScene::new(&scene);
+        let mut rng = Rng(7);
+        let mut checked = 0;
+        for &t in prepared.triangles.iter().step_by(7) {
+            let fast = prepared.triangle_surface(t);
+            if fast.textured {
+                continue;
+            }
+            let general = TriangleSurface { textured: true, ..fast };
+            for _ in 0..4 {
+                let b = Vec3::new(rng.f(), rng.f(), rng.f());
+                let b = b / (b.x + b.y + b.z);
+                let (x, y) = (fast.at(b, 0.01), general.at(b, 0.01));
+                let bits = |s: Surface| {
+                    [s.position, s.normal, s.emission, s.ambient, s.diffuse, s.specular]
+                        .map(|v| v.to_array().map(f32::to_bits))
+                        .concat()
+                        .into_iter()
+                        .chain([s.opacity, s.shininess, s.reflectivity, s.ior].map(f32::to_bits))
+                        .collect::<Vec<u32>>()
+                };
+                assert_eq!(bits(x), bits(y), "triangle {t:?} at {b}");
+                checked += 1;
+            }
+        }
+        assert!(checked > 100, "only {checked} points checked");
+    }
+
+    #[test]
     fn fast_sampler_matches_texture_sample_bit_for_bit() {
         let texels: Vec<[u8; 4]> =
             (0..37u32 * 20).map(|i| [(i * 7) as u8, (i * 13 + 5) as u8, (i * 29) as u8, (i * 3 + 100) as u8]).collect();
