@@ -489,7 +489,10 @@ impl SceneBvh {
                     swap(1, 3);
                     swap(1, 2);
                     let hits = mask.count_ones() as usize;
-                    stack.extend_from_slice(&k[..hits - 1]);
+                    // A fixed-size copy (no call) cut back to the hits.
+                    let len = stack.len();
+                    stack.extend_from_slice(&k[..3]);
+                    stack.truncate(len + hits - 1);
                     cur = k[(hits - 1) & 3] as u32;
                     continue;
                 }
@@ -603,14 +606,19 @@ impl SceneBvh {
         loop {
             if cur & LEAF == 0 {
                 let n = &self.nodes[cur as usize];
-                let (_, mut mask) = node_hits(n, &r, t_min, t_max);
+                let (_, mask) = node_hits(n, &r, t_min, t_max);
                 if mask != 0 {
-                    cur = n.child[mask.trailing_zeros() as usize & 3];
-                    mask &= mask - 1;
-                    while mask != 0 {
-                        stack.push(n.child[mask.trailing_zeros() as usize & 3]);
-                        mask &= mask - 1;
+                    // Branch-free compaction of the children hit; visit the first, stack the rest.
+                    let mut hits = [0u32; 4];
+                    let mut k = 0;
+                    for (c, &child) in n.child.iter().enumerate() {
+                        hits[k & 3] = child;
+                        k += (mask >> c & 1) as usize;
                     }
+                    let len = stack.len();
+                    stack.extend_from_slice(&hits[1..]);
+                    stack.truncate(len + k - 1);
+                    cur = hits[0];
                     continue;
                 }
             } else {
