@@ -237,8 +237,13 @@ impl TriangleSurface<'_> {
 /// path (library `floor` calls, the lazily built sRGB table, bounds checks per texel).
 #[inline]
 pub fn sample_texture(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
-    let lod = t.lod_for_footprint(footprint);
-    let max = (t.levels.len() - 1) as f32;
+    let (Some(base), Some(last)) = (t.levels.first(), t.levels.len().checked_sub(1)) else {
+        return t.sample(uv, t.lod_for_footprint(footprint));
+    };
+    // `Texture::lod_for_footprint`, same expression.
+    let texels = footprint * base.width.max(base.height) as f32;
+    let lod = if texels <= 1.0 { 0.0 } else { texels.log2() };
+    let max = last as f32;
     let lod = if lod.is_finite() { lod.clamp(0.0, max) } else { 0.0 };
     let l0 = floor(lod);
     let f = lod - l0;
