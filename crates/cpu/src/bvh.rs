@@ -287,14 +287,14 @@ fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
     }
 }
 
-/// Builds leaf packs in depth-first leaf order during the collapse.
+/// Lays out leaf packs in depth-first leaf order during the collapse (the packs themselves are
+/// filled afterwards, in parallel, from these descriptors).
 struct Packer<'a> {
     corners: &'a [[Vec3; 3]],
     /// Triangle index of each primitive position after the build's partitioning.
     order: &'a [u32],
-    packs: Vec<Tri4>,
-    /// Triangle index of each pack slot, `u32::MAX` for unused lanes.
-    slot_tri: Vec<u32>,
+    /// Per pack: first position in `order` and number of triangles (1–4).
+    packs: Vec<(u32, u32)>,
     leaves: usize,
 }
 
@@ -307,24 +307,7 @@ impl Packer<'_> {
         if n_packs <= MAX_LEAF_PACKS {
             let start = self.packs.len() as u32;
             for chunk in (first..first + count).step_by(4) {
-                let mut p = Tri4::EMPTY;
-                for lane in 0..4 {
-                    let k = chunk + lane as u32;
-                    if k >= first + count {
-                        self.slot_tri.push(u32::MAX);
-                        continue;
-                    }
-                    let tri = self.order[k as usize];
-                    let [a, b, c] = self.corners[tri as usize];
-                    let (e1, e2) = (b - a, c - a);
-                    for axis in 0..3 {
-                        p.v0[axis][lane] = a[axis];
-                        p.e1[axis][lane] = e1[axis];
-                        p.e2[axis][lane] = e2[axis];
-                    }
-                    self.slot_tri.push(tri);
-                }
-                self.packs.push(p);
+                self.packs.push((chunk, (first + count - chunk).min(4)));
             }
             self.leaves += 1;
             return LEAF | start << LEAF_PACK_BITS | (n_packs as u32 - 1);
@@ -380,13 +363,7 @@ impl SceneBvh {
         let order: Vec<u32> = prims.iter().map(Prim::index).collect();
         drop(prims);
         let mut nodes = Vec::with_capacity(order.len() / 8);
-        let mut packer = Packer {
-            corners: &corners,
-            order: &order,
-            packs: Vec::with_capacity(order.len() / 3),
-            slot_tri: Vec::with_capacity(order.len() * 4 / 3),
-            leaves: 0,
-        };
+        let mut packer = Packer { corners: &corners, order: &order, packs: Vec::with_capacity(order.len() / 3), leaves: 0 };
         match &root {
             None => {}
             Some(BuildNode::Leaf { bounds, first, count }) => {
@@ -401,17 +378,38 @@ impl SceneBvh {
         }
         drop(root);
 
-        let Packer { packs, slot_tri, leaves, .. } = packer;
-        let slot_ref: Vec<TriangleRef> =
-            slot_tri.iter().map(|&i| if i == u32::MAX { NO_TRI } else { prepared.triangles[i as usize] }).collect();
+        let Packer { packs: descs, leaves, .. } = packer;
+        let packs: Vec<Tri4> = descs
+            .par_iter()
+            .map(|&(first, n)| {
+                let mut p = Tri4::EMPTY;
+                for (lane, &tri) in order[first as usize..(first + n) as usize].iter().enumerate() {
+                    let [a, b, c] = corners[tri as usize];
+                    let (e1, e2) = (b - a, c - a);
+                    for axis in 0..3 {
+                        p.v0[axis][lane] = a[axis];
+                        p.e1[axis][lane] = e1[axis];
+                        p.e2[axis][lane] = e2[axis];
+                    }
+                }
+                p
+            })
+            .collect();
+        let slot_ref: Vec<TriangleRef> = descs
+            .par_iter()
+            .flat_map_iter(|&(first, n)| {
+                let order = &order;
+                (0..4).map(move |lane| if lane < n { prepared.triangles[order[(first + lane) as usize] as usize] } else { NO_TRI })
+            })
+            .collect();
         let slot_shadow: Vec<f32> = slot_ref
-            .iter()
+            .par_iter()
             .map(
                 |t| if *t == NO_TRI { 1.0 } else { material_shadow.get(prepared.meshes[t.mesh as usize].material).copied().unwrap_or(1.0) },
             )
             .collect();
         let pack_shadow = slot_shadow
-            .chunks_exact(4)
+            .par_chunks_exact(4)
             .map(|s| {
                 let mut bits = 0u8;
                 for (lane, &tr) in s.iter().enumerate() {
@@ -1062,7 +1060,7 @@ mod tests {
         let p = PreparedScene::new(&scene);
         let corners: Vec<[Vec3; 3]> = p.triangles.iter().map(|t| p.triangle(*t)).collect();
         let order: Vec<u32> = (0..150).collect();
-        let mut packer = Packer { corners: &corners, order: &order, packs: Vec::new(), slot_tri: Vec::new(), leaves: 0 };
+        let mut packer = Packer { corners: &corners, order: &order, packs: Vec::new(), leaves: 0 };
         let mut nodes = Vec::new();
         // 150 triangles = 38 packs: one extra node over four leaves of ≤ 16 packs.
         let r = packer.leaf(0, 150, &mut nodes);
@@ -1074,9 +1072,10 @@ mod tests {
             assert!(c & LEAF != 0);
             let packs = leaf_packs(c);
             assert!(packs.len() <= MAX_LEAF_PACKS);
-            for slot in packs.start * 4..packs.end * 4 {
-                let t = packer.slot_tri[slot];
-                if t != u32::MAX {
+            for &(first, n) in &packer.packs[packs] {
+                assert!((1..=4).contains(&n));
+                for pos in first..first + n {
+                    let t = order[pos as usize];
                     seen[t as usize] += 1;
                     // The child box holds the triangle.
                     for v in corners[t as usize] {
