@@ -71,6 +71,11 @@ pub struct RenderArgs {
     /// the capsule after (not beside) the raster.
     #[arg(long)]
     pub clip_capsule: bool,
+    /// Paper 2's behaviour: the point cloud only merges by depth, it casts no shadows on
+    /// polygons and is not seen in reflections or refractions. Faster trace stage, at the cost
+    /// of those effects.
+    #[arg(long)]
+    pub no_sphere_effects: bool,
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,

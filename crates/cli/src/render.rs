@@ -88,6 +88,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         CliError::bad_input(format!("{file}: {e}"))
     })?;
     renderer.clip_capsule_at_raster_depth = args.clip_capsule;
+    renderer.spheres_in_trace = !args.no_sphere_effects;
     let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage));
     progress.finish();
 

@@ -38,6 +38,10 @@ pub struct CpuRenderer<'s> {
     /// depth. Saves the rays that would end behind polygons, at the cost of running the
     /// capsule after (not beside) the raster.
     pub clip_capsule_at_raster_depth: bool,
+    /// Beyond paper 2: the point-cloud spheres cast shadows on polygons and appear in
+    /// reflections and refractions (default on). Off gives the paper's behaviour (the RT-scene
+    /// only merges by depth): a faster trace stage, at the cost of those effects.
+    pub spheres_in_trace: bool,
 }
 
 impl<'s> CpuRenderer<'s> {
@@ -51,7 +55,15 @@ impl<'s> CpuRenderer<'s> {
         } else {
             Some(PointCloudCapsule::new(&scene.point_clouds, scene.lights.clone(), scene.environment.clone())?)
         };
-        Ok(Self { scene, prepared, bvh, capsule, heuristic: Heuristic::new(scene.heuristic.clone()), clip_capsule_at_raster_depth: false })
+        Ok(Self {
+            scene,
+            prepared,
+            bvh,
+            capsule,
+            heuristic: Heuristic::new(scene.heuristic.clone()),
+            clip_capsule_at_raster_depth: false,
+            spheres_in_trace: true,
+        })
     }
 
     pub fn prepared(&self) -> &PreparedScene<'s> {
@@ -233,7 +245,8 @@ impl<'s> CpuRenderer<'s> {
                 rays: Default::default(),
             };
         }
-        trace::trace_with_spheres(&self.prepared, &self.bvh, self.capsule.as_ref(), gbuffer, camera)
+        let spheres = self.capsule.as_ref().filter(|_| self.spheres_in_trace);
+        trace::trace_with_spheres(&self.prepared, &self.bvh, spheres, gbuffer, camera)
     }
 }
 
