@@ -604,19 +604,14 @@ impl SceneBvh {
         loop {
             if cur & LEAF == 0 {
                 let n = &self.nodes[cur as usize];
-                let (_, mask) = node_hits(n, &r, t_min, t_max);
+                let (_, mut mask) = node_hits(n, &r, t_min, t_max);
                 if mask != 0 {
-                    // Branch-free compaction of the children hit; visit the first, stack the rest.
-                    let mut hits = [0u32; 4];
-                    let mut k = 0;
-                    for (c, &child) in n.child.iter().enumerate() {
-                        hits[k & 3] = child;
-                        k += (mask >> c & 1) as usize;
+                    cur = n.child[mask.trailing_zeros() as usize & 3];
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        stack.push(n.child[mask.trailing_zeros() as usize & 3]);
+                        mask &= mask - 1;
                     }
-                    let len = stack.len();
-                    stack.extend_from_slice(&hits[1..]);
-                    stack.truncate(len + k - 1);
-                    cur = hits[0];
                     continue;
                 }
             } else {
