@@ -4,6 +4,9 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use hybrid_core::Mode;
+use hybrid_scene::{Budget, HeuristicSettings, Policy};
+
+use crate::CliError;
 
 #[derive(Debug, Parser)]
 #[command(
@@ -53,16 +56,8 @@ pub struct RenderArgs {
     /// Position on the scene's camera path, in seconds (the scene's camera when absent).
     #[arg(long)]
     pub time: Option<f32>,
-    /// Heuristic budget T in cost units per frame (overrides the scene). Lower budgets trace
-    /// fewer objects: faster frames at the cost of missing shadows/reflections/refractions.
-    #[arg(long, conflicts_with = "budget_ms")]
-    pub budget: Option<f64>,
-    /// Heuristic budget in milliseconds of trace time per frame (overrides the scene).
-    #[arg(long)]
-    pub budget_ms: Option<f64>,
-    /// Heuristic selection policy (overrides the scene).
-    #[arg(long, value_enum)]
-    pub policy: Option<PolicyChoice>,
+    #[command(flatten)]
+    pub heuristic: HeuristicArgs,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -121,21 +116,59 @@ pub struct BenchArgs {
     /// Also render the path at several cost budgets with both policies (FLIP vs time).
     #[arg(long)]
     pub sweep_budget: bool,
-    /// Heuristic budget in cost units (overrides the scene).
-    #[arg(long, conflicts_with = "budget_ms")]
-    pub budget: Option<f64>,
-    /// Heuristic budget in milliseconds of trace time (overrides the scene).
-    #[arg(long)]
-    pub budget_ms: Option<f64>,
-    /// Heuristic selection policy (overrides the scene).
-    #[arg(long, value_enum)]
-    pub policy: Option<PolicyChoice>,
+    #[command(flatten)]
+    pub heuristic: HeuristicArgs,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
     /// No progress lines on stderr.
     #[arg(short, long)]
     pub quiet: bool,
+}
+
+/// Heuristic overrides shared by `render` and `bench`.
+#[derive(Debug, Args)]
+pub struct HeuristicArgs {
+    /// Heuristic budget T in cost units per frame (overrides the scene). Lower budgets trace
+    /// fewer objects: faster frames at the cost of missing shadows/reflections/refractions.
+    #[arg(long, conflicts_with = "budget_ms")]
+    pub budget: Option<f64>,
+    /// Heuristic budget in milliseconds of trace time per frame (overrides the scene).
+    #[arg(long)]
+    pub budget_ms: Option<f64>,
+    /// Heuristic selection policy (overrides the scene).
+    #[arg(long, value_enum)]
+    pub policy: Option<PolicyChoice>,
+}
+
+impl HeuristicArgs {
+    /// Rejects budgets that are negative or not finite.
+    pub fn check(&self) -> Result<(), CliError> {
+        for (flag, v) in [("--budget", self.budget), ("--budget-ms", self.budget_ms)] {
+            if let Some(v) = v
+                && (!v.is_finite() || v < 0.0)
+            {
+                return Err(CliError::bad_input(format!("{flag} must be a finite number ≥ 0, got {v}")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Applies the overrides to a scene's heuristic settings.
+    pub fn apply(&self, settings: &mut HeuristicSettings) {
+        if let Some(b) = self.budget {
+            settings.budget = Budget::Cost(b);
+        }
+        if let Some(ms) = self.budget_ms {
+            settings.budget = Budget::Millis(ms);
+        }
+        if let Some(p) = self.policy {
+            settings.policy = match p {
+                PolicyChoice::Paper => Policy::Paper,
+                PolicyChoice::Knapsack => Policy::Knapsack,
+            };
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

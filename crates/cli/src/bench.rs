@@ -29,7 +29,7 @@ use serde_json::json;
 
 use self::plot::{Chart, HLine, Series, write_chart};
 use crate::CliError;
-use crate::args::{BackendChoice, BenchArgs, PolicyChoice};
+use crate::args::{BackendChoice, BenchArgs};
 use crate::output::{ensure_dir, write_bytes};
 
 /// Warm-up frames rendered (and discarded) at the start of every pass.
@@ -215,13 +215,7 @@ fn check_args(args: &BenchArgs) -> Result<(), CliError> {
     if args.modes.is_empty() {
         return Err(CliError::bad_input("--modes needs at least one mode (hybrid, all, rt-only, raster)"));
     }
-    for (flag, v) in [("--budget", args.budget), ("--budget-ms", args.budget_ms)] {
-        if let Some(v) = v
-            && (!v.is_finite() || v < 0.0)
-        {
-            return Err(CliError::bad_input(format!("{flag} must be a finite number ≥ 0, got {v}")));
-        }
-    }
+    args.heuristic.check()?;
     if args.threads == Some(0) {
         return Err(CliError::bad_input("--threads must be at least 1"));
     }
@@ -363,18 +357,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     check_args(&args)?;
     let name = args.scene.display().to_string();
     let mut scene = load_scene(&args.scene)?;
-    if let Some(b) = args.budget {
-        scene.heuristic.budget = Budget::Cost(b);
-    }
-    if let Some(ms) = args.budget_ms {
-        scene.heuristic.budget = Budget::Millis(ms);
-    }
-    if let Some(p) = args.policy {
-        scene.heuristic.policy = match p {
-            PolicyChoice::Paper => Policy::Paper,
-            PolicyChoice::Knapsack => Policy::Knapsack,
-        };
-    }
+    args.heuristic.apply(&mut scene.heuristic);
     let plan = plan(&args, &scene, &name)?;
     // Everything is checked: now the output folder (created and probed before any rendering).
     ensure_dir(&args.out)?;

@@ -4,11 +4,11 @@ use std::time::{Duration, Instant};
 
 use hybrid_core::{FrameSettings, Mode};
 use hybrid_cpu::frame::CpuRenderer;
-use hybrid_scene::{Budget, Policy, Scene, demo_scene, load_scene};
+use hybrid_scene::{Scene, demo_scene, load_scene};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
-use crate::args::{BackendChoice, PolicyChoice, RenderArgs};
+use crate::args::{BackendChoice, RenderArgs};
 use crate::dump::{DumpInput, write_all};
 use crate::output::{ensure_dir, ensure_parent, write_bytes, write_png_rgba8};
 
@@ -31,13 +31,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         }
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
     }
-    for (flag, v) in [("--budget", args.budget), ("--budget-ms", args.budget_ms)] {
-        if let Some(v) = v
-            && (!v.is_finite() || v < 0.0)
-        {
-            return Err(CliError::bad_input(format!("{flag} must be a finite number ≥ 0, got {v}")));
-        }
-    }
+    args.heuristic.check()?;
     match args.backend {
         BackendChoice::Cpu => {}
         BackendChoice::Auto => {
@@ -54,18 +48,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         Some(path) => load_scene(path)?,
         None => demo_scene(),
     };
-    if let Some(b) = args.budget {
-        scene.heuristic.budget = Budget::Cost(b);
-    }
-    if let Some(ms) = args.budget_ms {
-        scene.heuristic.budget = Budget::Millis(ms);
-    }
-    if let Some(p) = args.policy {
-        scene.heuristic.policy = match p {
-            PolicyChoice::Paper => Policy::Paper,
-            PolicyChoice::Knapsack => Policy::Knapsack,
-        };
-    }
+    args.heuristic.apply(&mut scene.heuristic);
     let camera = match args.time {
         None => scene.camera,
         Some(t) => {
