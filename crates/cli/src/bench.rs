@@ -160,7 +160,8 @@ impl Bench {
         let mut renderer = CpuRenderer::new(scene).map_err(|e| CliError::bad_input(format!("{}: {e}", self.scene_name)))?;
         if let Some(first) = shots.first() {
             for _ in 0..WARMUP_FRAMES {
-                renderer.render(&first.camera, settings, &mut |_| {});
+                let frame = renderer.render(&first.camera, settings, &mut |_| {});
+                renderer.recycle(frame);
             }
         }
         let mut records = Vec::with_capacity(shots.len());
@@ -171,6 +172,7 @@ impl Bench {
             if keep(i) {
                 images.insert(i, frame.buffers.final_srgb.iter().flat_map(|p| [p[0], p[1], p[2]]).collect());
             }
+            renderer.recycle(frame);
         }
         if !self.quiet {
             let m = mean(records.iter().map(|r| r.timings.frame)).unwrap_or(0.0);

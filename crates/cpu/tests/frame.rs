@@ -106,3 +106,19 @@ fn every_mode_fills_its_buffers() {
         }
     }
 }
+
+#[test]
+fn recycled_gbuffers_give_identical_frames() {
+    let scene = demo_scene();
+    let settings = FrameSettings { width: 160, height: 90, mode: Mode::Hybrid };
+    let path = scene.camera_path.as_ref().expect("the demo has a camera path");
+    let (a, b) = (path.camera_at(&scene.camera, 0.0), path.camera_at(&scene.camera, path.duration() * 0.5));
+    let mut fresh = CpuRenderer::new(&scene).unwrap();
+    let expected = fresh.render(&b, settings, &mut |_| {});
+    let mut reusing = CpuRenderer::new(&scene).unwrap();
+    let first = reusing.render(&a, settings, &mut |_| {});
+    reusing.recycle(first);
+    let second = reusing.render(&b, settings, &mut |_| {});
+    assert_eq!(second.gbuffer, expected.gbuffer);
+    assert_eq!(second.buffers.final_srgb, expected.buffers.final_srgb);
+}
