@@ -28,6 +28,12 @@ pub struct RayCounts {
     pub refraction: u64,
 }
 
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.primary + self.shadow + self.reflection + self.refraction
+    }
+}
+
 impl std::ops::AddAssign for RayCounts {
     fn add_assign(&mut self, o: Self) {
         self.primary += o.primary;

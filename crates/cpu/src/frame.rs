@@ -122,12 +122,7 @@ impl<'s> CpuRenderer<'s> {
             self.heuristic.record_trace(heuristic_report.as_ref().map_or(0.0, |r| r.spent), t.trace);
         }
         t.frame = ms_since(frame_start);
-        let rays = RayCounts {
-            primary: primary_rays,
-            shadow: traced.rays.shadow,
-            reflection: traced.rays.reflection,
-            refraction: traced.rays.refraction,
-        };
+        let rays = RayCounts { primary: primary_rays, ..traced.rays };
         let report = FrameReport {
             backend: "cpu".into(),
             size: [settings.width, settings.height],

@@ -38,29 +38,7 @@ use crate::bvh::SceneBvh;
 use crate::capsule::PointCloudCapsule;
 use crate::prepare::PreparedScene;
 
-/// Rays traced by a frame, by kind.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
-pub struct RayCounts {
-    pub primary: u64,
-    pub shadow: u64,
-    pub reflection: u64,
-    pub refraction: u64,
-}
-
-impl RayCounts {
-    pub fn total(&self) -> u64 {
-        self.primary + self.shadow + self.reflection + self.refraction
-    }
-}
-
-impl std::ops::AddAssign for RayCounts {
-    fn add_assign(&mut self, o: Self) {
-        self.primary += o.primary;
-        self.shadow += o.shadow;
-        self.reflection += o.reflection;
-        self.refraction += o.refraction;
-    }
-}
+pub use hybrid_core::report::RayCounts;
 
 /// The trace stage's buffers (paper Fig. 5), row-major like the G-buffer.
 #[derive(Debug, Clone, PartialEq)]
