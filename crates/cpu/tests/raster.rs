@@ -5,41 +5,21 @@ use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer};
 use hybrid_cpu::PreparedScene;
 use hybrid_cpu::lighting::{ViewRays, deferred_lighting, primary_ray};
 use hybrid_cpu::raster::{merge_rt_layer, rasterize, rasterize_into};
-use hybrid_scene::{
-    Attenuation, Camera, ColorSpace, Environment, HeuristicSettings, Lights, Material, Mesh, Object, ObjectSource, PointLight, Projection,
-    Scene, Skybox, Texture, TraceSettings, Transform,
-};
+use hybrid_scene::{Attenuation, Camera, ColorSpace, Environment, Lights, Material, Mesh, PointLight, Projection, Scene, Skybox, Texture};
 
 const SKY: Vec3 = Vec3::new(0.3, 0.6, 0.9);
 const W: u32 = 160;
 const H: u32 = 90;
 
 fn scene(materials: Vec<Material>, meshes: Vec<Mesh>, lights: Lights, camera: Camera) -> Scene {
-    let objects = meshes
-        .into_iter()
-        .enumerate()
-        .map(|(i, m)| Object {
-            name: format!("object {i}"),
-            source: ObjectSource::Plane,
-            transform: Transform::default(),
-            meshes: vec![m],
-            relevance: 1.0,
-            cost: 1.0,
-        })
-        .collect();
-    Scene {
-        source: None,
-        camera,
-        environment: Environment { ambient: Vec3::splat(0.1), ior: 1.0, skybox: Skybox::Color(SKY) },
-        heuristic: HeuristicSettings::default(),
-        trace: TraceSettings::default(),
-        materials,
-        textures: Vec::new(),
-        objects,
-        lights,
-        point_clouds: Vec::new(),
-        camera_path: None,
+    let mut scene = Scene::new(camera);
+    scene.environment = Environment { ambient: Vec3::splat(0.1), ior: 1.0, skybox: Skybox::Color(SKY) };
+    scene.materials = materials;
+    scene.lights = lights;
+    for (i, m) in meshes.into_iter().enumerate() {
+        scene.push_mesh_object(format!("object {i}"), m);
     }
+    scene
 }
 
 /// A quad from four corners (two triangles 0-1-2, 0-2-3) with UVs (0,0), (1,0), (1,1), (0,1).

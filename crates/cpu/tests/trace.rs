@@ -7,39 +7,19 @@ use hybrid_core::{GBuffer, Surface};
 use hybrid_cpu::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::trace::{RayCounts, TraceOutput, primary_ray_count, rt_only_gbuffer, trace};
-use hybrid_scene::{
-    Camera, ColorSpace, DirectionalLight, Environment, HeuristicSettings, Lights, Material, Mesh, Object, ObjectSource, Projection, Scene,
-    Skybox, Texture, TraceSettings, Transform,
-};
+use hybrid_scene::{Camera, ColorSpace, DirectionalLight, Environment, Lights, Material, Mesh, Projection, Scene, Skybox, Texture};
 
 const SKY: Vec3 = Vec3::new(0.3, 0.6, 0.9);
 
 fn scene(materials: Vec<Material>, meshes: Vec<Mesh>, lights: Lights, camera: Camera) -> Scene {
-    let objects = meshes
-        .into_iter()
-        .enumerate()
-        .map(|(i, m)| Object {
-            name: format!("object {i}"),
-            source: ObjectSource::Plane,
-            transform: Transform::default(),
-            meshes: vec![m],
-            relevance: 1.0,
-            cost: 1.0,
-        })
-        .collect();
-    Scene {
-        source: None,
-        camera,
-        environment: Environment { ambient: Vec3::ZERO, ior: 1.0, skybox: Skybox::Color(SKY) },
-        heuristic: HeuristicSettings::default(),
-        trace: TraceSettings::default(),
-        materials,
-        textures: Vec::new(),
-        objects,
-        lights,
-        point_clouds: Vec::new(),
-        camera_path: None,
+    let mut scene = Scene::new(camera);
+    scene.environment = Environment { ambient: Vec3::ZERO, ior: 1.0, skybox: Skybox::Color(SKY) };
+    scene.materials = materials;
+    scene.lights = lights;
+    for (i, m) in meshes.into_iter().enumerate() {
+        scene.push_mesh_object(format!("object {i}"), m);
     }
+    scene
 }
 
 /// A quad centred at `c` spanned by half-edges `u`, `v`; normal `u × v`.

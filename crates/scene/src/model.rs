@@ -33,6 +33,40 @@ pub struct Scene {
     pub camera_path: Option<CameraPath>,
 }
 
+impl Scene {
+    /// An empty scene seen from `camera`, with default environment, heuristic and trace
+    /// settings: no materials, objects, lights or point clouds (for scenes built in code).
+    pub fn new(camera: Camera) -> Self {
+        Self {
+            source: None,
+            camera,
+            environment: Environment::default(),
+            heuristic: HeuristicSettings::default(),
+            trace: TraceSettings::default(),
+            materials: Vec::new(),
+            textures: Vec::new(),
+            objects: Vec::new(),
+            lights: Lights::default(),
+            point_clouds: Vec::new(),
+            camera_path: None,
+        }
+    }
+
+    /// Adds an object made of one mesh (already in world space: identity transform), with
+    /// relevance K = 1 and cost E = 1. Returns its object id.
+    pub fn push_mesh_object(&mut self, name: impl Into<String>, mesh: Mesh) -> usize {
+        self.objects.push(Object {
+            name: name.into(),
+            source: ObjectSource::Plane,
+            transform: Transform::default(),
+            meshes: vec![mesh],
+            relevance: 1.0,
+            cost: 1.0,
+        });
+        self.objects.len() - 1
+    }
+}
+
 /// Global environment (paper §3: global ambient colour, environment IOR, skybox).
 #[derive(Debug, Clone)]
 pub struct Environment {
