@@ -15,7 +15,7 @@ use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, RayGen, RtCapsule};
 use hybrid_cpu::spheres::SphereBvh;
 use hybrid_scene::{Camera, DirectionalLight, Environment, Lights, PointCloud, PointColoring, Projection};
 
-const SCAN: &str = "/work/shared/assets/tree-pointcloud/rtls_tls_scan_1m.ply";
+const SCAN: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets/tree-pointcloud/rtls_tls_scan_1m.ply");
 const W: u32 = 1920;
 const H: u32 = 1080;
 const RADIUS: f32 = 0.01;

@@ -16,8 +16,8 @@ use hybrid_cpu::PreparedScene;
 use hybrid_cpu::lighting::deferred_lighting;
 use hybrid_cpu::raster::{rasterize, rasterize_into};
 use hybrid_scene::{
-    Camera, ColorSpace, DirectionalLight, Environment, HeuristicSettings, Lights, Material, Mesh, Object, ObjectSource, PointLight,
-    Projection, Scene, Skybox, Texture, TraceSettings, Transform,
+    Camera, ColorSpace, DirectionalLight, Environment, Lights, Material, Mesh, Object, ObjectSource, PointLight, Projection, Scene, Skybox,
+    Texture, Transform,
 };
 
 const W: u32 = 1280;
@@ -111,19 +111,12 @@ fn bench_scene() -> (Scene, Camera) {
         }],
         spot: Vec::new(),
     };
-    let scene = Scene {
-        source: None,
-        camera,
-        environment: Environment { ambient: Vec3::splat(0.1), ior: 1.0, skybox: Skybox::Color(Vec3::new(0.4, 0.6, 0.9)) },
-        heuristic: HeuristicSettings::default(),
-        trace: TraceSettings::default(),
-        materials: vec![plain, textured],
-        textures: vec![tex],
-        objects,
-        lights,
-        point_clouds: Vec::new(),
-        camera_path: None,
-    };
+    let mut scene = Scene::new(camera);
+    scene.environment = Environment { ambient: Vec3::splat(0.1), ior: 1.0, skybox: Skybox::Color(Vec3::new(0.4, 0.6, 0.9)) };
+    scene.materials = vec![plain, textured];
+    scene.textures = vec![tex];
+    scene.objects = objects;
+    scene.lights = lights;
     (scene, camera)
 }
 

@@ -31,26 +31,18 @@ use hybrid_cpu::trace::{rt_only_gbuffer, trace};
 use hybrid_scene::{Camera, Lights, Material, Mesh, Object, ObjectSource, PointLight, Projection, Scene, Transform};
 use rayon::prelude::*;
 
-const SPONZA: &str = "/work/shared/assets/sponza-dabrovic/sponza_dabrovic.obj";
+const SPONZA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets/sponza-dabrovic/sponza_dabrovic.obj");
 const WIDTH: u32 = 640;
 const HEIGHT: u32 = 360;
 
 fn scene_of(meshes: Vec<Mesh>, materials: Vec<Material>, camera: Camera, textures: Vec<hybrid_scene::Texture>) -> Scene {
     let object =
         Object { name: "all".into(), source: ObjectSource::Plane, transform: Transform::default(), meshes, relevance: 1.0, cost: 1.0 };
-    Scene {
-        source: None,
-        camera,
-        environment: Default::default(),
-        heuristic: Default::default(),
-        trace: Default::default(),
-        materials,
-        textures,
-        objects: vec![object],
-        lights: Default::default(),
-        point_clouds: Vec::new(),
-        camera_path: None,
-    }
+    let mut scene = Scene::new(camera);
+    scene.materials = materials;
+    scene.textures = textures;
+    scene.objects.push(object);
+    scene
 }
 
 fn sphere(c: Vec3, r: f32, slices: u32, stacks: u32) -> Mesh {

@@ -13,7 +13,7 @@ use hybrid_scene::{Camera, DirectionalLight, Environment, Lights, PointCloud, Po
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-const TREE: &str = "/work/shared/assets/tree-pointcloud/rtls_pc_tree.ply";
+const TREE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets/tree-pointcloud/rtls_pc_tree.ply");
 
 // ---------------------------------------------------------------- block P / U
 
