@@ -1,7 +1,7 @@
 //! Trace-stage benchmarks: BVH build time and traced rays per second by ray kind.
 //!
 //! Scenes: a synthetic room of ~270K triangles (tessellated spheres on a floor, closed walls),
-//! and Sponza (`/work/shared/assets/sponza-dabrovic/sponza_dabrovic.obj`) when the OBJ loader can
+//! and Sponza (`shared/assets/sponza-dabrovic/sponza_dabrovic.obj` beside the repository) when the OBJ loader can
 //! read it. Rays: primary hits from `rt_only_gbuffer` at 640×360; shadow rays from each hit
 //! towards a point light (`any_hit_attenuation`); reflection rays (view direction reflected about
 //! the normal, `closest_hit`). Rays are traced in parallel as the trace stage does.
