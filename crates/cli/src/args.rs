@@ -177,7 +177,7 @@ pub enum BackendChoice {
     Auto,
     /// The pure-Rust CPU backend.
     Cpu,
-    /// The wgpu backend.
+    /// The wgpu backend (not built yet: asking for it is an error).
     Gpu,
 }
 
