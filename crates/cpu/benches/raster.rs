@@ -23,26 +23,11 @@ use hybrid_scene::{
 const W: u32 = 1280;
 const H: u32 = 720;
 
+/// A UV sphere of radius `r` at `centre` (the scene crate's unit-diameter primitive, placed).
 fn sphere(centre: Vec3, r: f32, slices: u32, stacks: u32, material: usize) -> Mesh {
-    let mut m = Mesh { material, ..Default::default() };
-    for i in 0..=stacks {
-        let phi = i as f32 / stacks as f32 * std::f32::consts::PI;
-        for j in 0..=slices {
-            let th = j as f32 / slices as f32 * std::f32::consts::TAU;
-            let n = Vec3::new(phi.sin() * th.sin(), phi.cos(), phi.sin() * th.cos());
-            m.positions.push(centre + n * r);
-            m.normals.push(n);
-            m.uvs.push(Vec2::new(j as f32 / slices as f32, i as f32 / stacks as f32));
-        }
-    }
-    let cols = slices + 1;
-    for i in 0..stacks {
-        for j in 0..slices {
-            let (a, b) = (i * cols + j, (i + 1) * cols + j);
-            m.indices.push([a, b, b + 1]);
-            m.indices.push([a, b + 1, a + 1]);
-        }
-    }
+    let mut m = hybrid_scene::primitives::sphere(slices, stacks);
+    m.positions.iter_mut().for_each(|p| *p = centre + *p * (2.0 * r));
+    m.material = material;
     m
 }
 

@@ -45,26 +45,10 @@ fn scene_of(meshes: Vec<Mesh>, materials: Vec<Material>, camera: Camera, texture
     scene
 }
 
+/// A UV sphere of radius `r` at `c` (the scene crate's unit-diameter primitive, placed).
 fn sphere(c: Vec3, r: f32, slices: u32, stacks: u32) -> Mesh {
-    let mut m = Mesh::default();
-    for j in 0..=stacks {
-        let th = std::f32::consts::PI * j as f32 / stacks as f32;
-        for i in 0..=slices {
-            let ph = std::f32::consts::TAU * i as f32 / slices as f32;
-            let n = Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin());
-            m.positions.push(c + n * r);
-            m.normals.push(n);
-            m.uvs.push(Vec2::new(i as f32 / slices as f32, j as f32 / stacks as f32));
-        }
-    }
-    let row = slices + 1;
-    for j in 0..stacks {
-        for i in 0..slices {
-            let (a, b) = (j * row + i, (j + 1) * row + i);
-            m.indices.push([a, b, a + 1]);
-            m.indices.push([a + 1, b, b + 1]);
-        }
-    }
+    let mut m = hybrid_scene::primitives::sphere(slices, stacks);
+    m.positions.iter_mut().for_each(|p| *p = c + *p * (2.0 * r));
     m
 }
 
