@@ -1,9 +1,13 @@
-//! Frame modes and per-frame settings (DESIGN §1).
+//! Frame modes, per-frame settings and what a frame produces (DESIGN §1).
 
 use std::fmt;
 use std::str::FromStr;
 
 use serde::Serialize;
+
+use crate::buffers::{FrameBuffers, GBuffer};
+use crate::depth_merge::PackedRtFrame;
+use crate::report::FrameReport;
 
 /// Which stages run (DESIGN §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
@@ -62,4 +66,15 @@ impl FrameSettings {
     pub fn pixel_count(&self) -> usize {
         self.width as usize * self.height as usize
     }
+}
+
+/// Everything one frame produced, on either backend: the buffers (for the image, dumps and tests) and the report.
+#[derive(Debug)]
+pub struct Frame {
+    pub settings: FrameSettings,
+    pub gbuffer: GBuffer,
+    pub buffers: FrameBuffers,
+    /// The capsule's packed RGBA16UI frame (paper 2), when the scene has point clouds.
+    pub rt_packed: Option<PackedRtFrame>,
+    pub report: FrameReport,
 }

@@ -11,4 +11,4 @@ pub mod report;
 pub mod shading;
 
 pub use buffers::{FrameBuffers, GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
-pub use frame::{FrameSettings, Mode};
+pub use frame::{Frame, FrameSettings, Mode};

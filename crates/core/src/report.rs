@@ -68,4 +68,22 @@ pub struct FrameReport {
     pub objects: u64,
     pub heuristic: Option<hybrid_heuristic::HeuristicReport>,
     pub capsule: Option<CapsuleReport>,
+    /// GPU backend: per-stage GPU times (timestamp queries at pass boundaries), when the adapter
+    /// offers timestamps. `timings_ms` stays wall-clock time on the host.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_timings_ms: Option<StageTimings>,
+    /// GPU backend: which adapter rendered the frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub adapter: Option<AdapterReport>,
+}
+
+/// The GPU adapter a frame ran on.
+#[derive(Debug, Clone, Serialize, PartialEq, Eq)]
+pub struct AdapterReport {
+    pub name: String,
+    /// "vulkan", "metal", "dx12" or "gl".
+    pub backend: String,
+    /// "discrete-gpu", "integrated-gpu", "virtual-gpu", "cpu" (software, e.g. lavapipe) or "other".
+    pub device_type: String,
+    pub driver: String,
 }

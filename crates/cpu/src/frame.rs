@@ -4,6 +4,7 @@
 use std::time::Instant;
 
 use glam::Vec3;
+pub use hybrid_core::Frame;
 use hybrid_core::depth_merge::{PackedRtFrame, unpack};
 use hybrid_core::report::{CapsuleReport, FrameReport, RayCounts, StageTimings};
 use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RtLayer};
@@ -14,17 +15,6 @@ use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, RtCapsule};
 use crate::prepare::PreparedScene;
 use crate::{blend, lighting, raster, trace};
-
-/// Everything one frame produced: the buffers (for the image, dumps and tests) and the report.
-#[derive(Debug)]
-pub struct Frame {
-    pub settings: FrameSettings,
-    pub gbuffer: GBuffer,
-    pub buffers: FrameBuffers,
-    /// The capsule's packed RGBA16UI frame (paper 2), when the scene has point clouds.
-    pub rt_packed: Option<PackedRtFrame>,
-    pub report: FrameReport,
-}
 
 /// The CPU backend with everything it keeps between frames: the prepared scene, its BVH, the
 /// point-cloud capsule and the heuristic's state (S per object, ms per cost unit).
@@ -133,6 +123,8 @@ impl<'s> CpuRenderer<'s> {
             objects: self.scene.objects.len() as u64,
             heuristic: heuristic_report,
             capsule: capsule_report,
+            gpu_timings_ms: None,
+            adapter: None,
         };
         let buffers = FrameBuffers {
             width: settings.width,

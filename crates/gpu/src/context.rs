@@ -1,0 +1,137 @@
+//! `context`: the wgpu instance, adapter, device and queue, found headless (no window, no
+//! display). One context serves any number of scenes and frames.
+
+use thiserror::Error;
+
+/// Why no GPU context could be made.
+#[derive(Debug, Error)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter found (wgpu saw none on Vulkan, Metal, DX12 or GL); on Linux without a GPU install Mesa's lavapipe: \
+         `apt-get install mesa-vulkan-drivers libvulkan1`, or use `--backend cpu`"
+    )]
+    NoAdapter,
+    #[error("no GPU adapter matches HYBRID_ADAPTER=`{wanted}` (found: {found})")]
+    NoMatchingAdapter { wanted: String, found: String },
+    #[error("the GPU adapter `{adapter}` refused a device: {source}")]
+    RequestDevice {
+        adapter: String,
+        #[source]
+        source: wgpu::RequestDeviceError,
+    },
+    #[error("the GPU adapter `{adapter}` cannot run this backend: {why}")]
+    Unsupported { adapter: String, why: String },
+    #[error("the scene does not fit the GPU adapter `{adapter}`: {why}")]
+    TooLarge { adapter: String, why: String },
+    #[error("GPU error: {0}")]
+    Device(String),
+}
+
+/// Which adapters a context may use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AdapterChoice {
+    /// Any adapter, best first (discrete, integrated, virtual, then software ones such as
+    /// lavapipe). `--backend gpu`.
+    Any,
+    /// Only hardware GPUs (not a CPU/software adapter). `--backend auto` tries this first and
+    /// falls back to the CPU backend when it fails.
+    HardwareOnly,
+}
+
+/// What the chosen adapter is, for reports.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AdapterSummary {
+    pub name: String,
+    /// "vulkan", "metal", "dx12", "gl".
+    pub backend: String,
+    /// "discrete-gpu", "integrated-gpu", "virtual-gpu", "cpu", "other".
+    pub device_type: String,
+    pub driver: String,
+}
+
+/// Device and queue, with what the adapter offers that the backend cares about.
+pub struct GpuContext {
+    pub instance: wgpu::Instance,
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub summary: AdapterSummary,
+    /// Timestamp queries at pass boundaries are available (per-stage GPU times).
+    pub timestamps: bool,
+}
+
+impl GpuContext {
+    /// Finds an adapter (best first; `HYBRID_ADAPTER=<substring>` picks one by name) and opens a
+    /// device with the adapter's own limits (large scenes need big storage buffers).
+    pub fn new(choice: AdapterChoice) -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        adapters.sort_by_key(|a| rank(&a.get_info()));
+        if let Ok(wanted) = std::env::var("HYBRID_ADAPTER") {
+            let found = adapters.iter().map(|a| a.get_info().name).collect::<Vec<_>>().join(", ");
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()));
+            if adapters.is_empty() {
+                return Err(GpuError::NoMatchingAdapter { wanted, found });
+            }
+        }
+        if choice == AdapterChoice::HardwareOnly {
+            adapters.retain(|a| !matches!(a.get_info().device_type, wgpu::DeviceType::Cpu | wgpu::DeviceType::Other));
+        }
+        // Compute shaders and storage textures are required: GL adapters without them are skipped.
+        adapters.retain(|a| a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS));
+        let adapter = adapters.into_iter().next().ok_or(GpuError::NoAdapter)?;
+        let info = adapter.get_info();
+        let summary = AdapterSummary {
+            name: info.name.clone(),
+            backend: format!("{:?}", info.backend).to_lowercase(),
+            device_type: device_type_name(info.device_type).into(),
+            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
+        };
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        let desc =
+            wgpu::DeviceDescriptor { label: Some("hybrid"), required_features, required_limits: adapter.limits(), ..Default::default() };
+        let (device, queue) = pollster::block_on(adapter.request_device(&desc))
+            .map_err(|source| GpuError::RequestDevice { adapter: summary.name.clone(), source })?;
+        Ok(Self { instance, adapter, device, queue, summary, timestamps })
+    }
+
+    /// Waits until the GPU has finished everything submitted so far.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))
+    }
+
+    /// The largest storage buffer one binding may hold on this device.
+    pub fn max_storage_binding(&self) -> u64 {
+        self.device.limits().max_storage_buffer_binding_size
+    }
+}
+
+/// Sort key: hardware before software, Vulkan/Metal/DX12 before GL.
+fn rank(info: &wgpu::AdapterInfo) -> (u8, u8) {
+    let kind = match info.device_type {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Cpu => 3,
+        wgpu::DeviceType::Other => 4,
+    };
+    let api = match info.backend {
+        wgpu::Backend::Vulkan | wgpu::Backend::Metal | wgpu::Backend::Dx12 => 0,
+        _ => 1,
+    };
+    (kind, api)
+}
+
+fn device_type_name(t: wgpu::DeviceType) -> &'static str {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => "discrete-gpu",
+        wgpu::DeviceType::IntegratedGpu => "integrated-gpu",
+        wgpu::DeviceType::VirtualGpu => "virtual-gpu",
+        wgpu::DeviceType::Cpu => "cpu",
+        wgpu::DeviceType::Other => "other",
+    }
+}

@@ -1,0 +1,12 @@
+//! `hybrid-gpu`: the wgpu backend (DESIGN §1). The same stages as `hybrid-cpu`, as GPU passes
+//! (WGSL beside the Rust in `src/shaders/`), headless on any wgpu adapter (Vulkan, Metal, DX12,
+//! GL; Mesa's lavapipe in CI). The CPU backend is its oracle in tests.
+
+pub mod context;
+pub mod readback;
+pub mod scene;
+pub mod shaders;
+pub mod targets;
+pub mod timing;
+
+pub use context::{AdapterChoice, AdapterSummary, GpuContext, GpuError};

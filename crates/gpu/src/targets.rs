@@ -1,0 +1,119 @@
+//! `targets`: the frame's GPU textures, one per buffer of DESIGN §2 (paper Table 2), made once
+//! per frame size and reused frame after frame.
+
+/// G-buffer target formats (DESIGN §2).
+pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+/// Normal, emission, ambient, diffuse+opacity, specular+shininess, optical, and the lighting,
+/// shadow, reflection and refraction buffers.
+pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+pub const OBJECT_ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+pub const MASK_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+/// Reversed-Z: cleared to 0 (far), compare Greater.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// The final image: sRGB-encoded by the blend shader (as the CPU's `encode_srgb`), stored as
+/// plain 8-bit so the bytes are exactly what the shader wrote.
+pub const FINAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// The capsule's packed colour + depth frame (paper 2, block P).
+pub const PACKED_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Uint;
+
+/// The G-buffer's colour attachments in the order of the raster pass's `@location`s.
+pub const GBUFFER_COLOR_FORMATS: [wgpu::TextureFormat; 8] = [
+    POSITION_FORMAT,  // 0 position
+    COLOR_FORMAT,     // 1 normal
+    COLOR_FORMAT,     // 2 emission
+    COLOR_FORMAT,     // 3 ambient
+    COLOR_FORMAT,     // 4 diffuse (rgb) + opacity (a)
+    COLOR_FORMAT,     // 5 specular (rgb) + shininess (a)
+    COLOR_FORMAT,     // 6 optical: reflectivity, IOR, opacity
+    OBJECT_ID_FORMAT, // 7 object id
+];
+
+/// One texture and its default view.
+pub struct Target {
+    pub texture: wgpu::Texture,
+    pub view: wgpu::TextureView,
+}
+
+impl Target {
+    pub fn new(device: &wgpu::Device, label: &str, width: u32, height: u32, format: wgpu::TextureFormat) -> Self {
+        let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC;
+        if format != DEPTH_FORMAT {
+            usage |= wgpu::TextureUsages::STORAGE_BINDING;
+        }
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        Self { texture, view }
+    }
+}
+
+/// Every texture of one frame (DESIGN §2), for one size.
+pub struct FrameTargets {
+    pub width: u32,
+    pub height: u32,
+    pub position: Target,
+    pub normal: Target,
+    pub emission: Target,
+    pub ambient: Target,
+    pub diffuse: Target,
+    pub specular: Target,
+    pub optical: Target,
+    pub object_id: Target,
+    pub mask: Target,
+    pub depth: Target,
+    pub lighting: Target,
+    pub shadow: Target,
+    pub reflection: Target,
+    pub refraction: Target,
+    pub final_image: Target,
+    /// The capsule's packed frame (written by its compute pass, read by the unpack pass).
+    pub packed: Target,
+}
+
+impl FrameTargets {
+    pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
+        let t = |label: &str, format| Target::new(device, label, width, height, format);
+        Self {
+            width,
+            height,
+            position: t("gbuffer.position", POSITION_FORMAT),
+            normal: t("gbuffer.normal", COLOR_FORMAT),
+            emission: t("gbuffer.emission", COLOR_FORMAT),
+            ambient: t("gbuffer.ambient", COLOR_FORMAT),
+            diffuse: t("gbuffer.diffuse", COLOR_FORMAT),
+            specular: t("gbuffer.specular", COLOR_FORMAT),
+            optical: t("gbuffer.optical", COLOR_FORMAT),
+            object_id: t("gbuffer.object_id", OBJECT_ID_FORMAT),
+            mask: t("gbuffer.mask", MASK_FORMAT),
+            depth: t("gbuffer.depth", DEPTH_FORMAT),
+            lighting: t("lighting", COLOR_FORMAT),
+            shadow: t("shadow", COLOR_FORMAT),
+            reflection: t("reflection", COLOR_FORMAT),
+            refraction: t("refraction", COLOR_FORMAT),
+            final_image: t("final", FINAL_FORMAT),
+            packed: t("rt_packed", PACKED_FORMAT),
+        }
+    }
+
+    /// The G-buffer's colour attachments in `GBUFFER_COLOR_FORMATS` order.
+    pub fn gbuffer_color_views(&self) -> [&wgpu::TextureView; 8] {
+        [
+            &self.position.view,
+            &self.normal.view,
+            &self.emission.view,
+            &self.ambient.view,
+            &self.diffuse.view,
+            &self.specular.view,
+            &self.optical.view,
+            &self.object_id.view,
+        ]
+    }
+}
