@@ -2,11 +2,20 @@
 //! (WGSL beside the Rust in `src/shaders/`), headless on any wgpu adapter (Vulkan, Metal, DX12,
 //! GL; Mesa's lavapipe in CI). The CPU backend is its oracle in tests.
 
+pub mod blend;
+pub mod bvh;
+pub mod capsule;
 pub mod context;
+pub mod frame;
+pub mod heuristic;
+pub mod lighting;
+pub mod primary;
+pub mod raster;
 pub mod readback;
 pub mod scene;
 pub mod shaders;
 pub mod targets;
 pub mod timing;
+pub mod trace;
 
 pub use context::{AdapterChoice, AdapterSummary, GpuContext, GpuError};

@@ -1,0 +1,1 @@
+//! `bvh`: (being written)
