@@ -14,6 +14,7 @@ pub mod raster;
 pub mod readback;
 pub mod scene;
 pub mod shaders;
+pub mod spheres;
 pub mod targets;
 pub mod timing;
 pub mod trace;

@@ -136,3 +136,56 @@ pub fn read_packed(ctx: &GpuContext, t: &FrameTargets) -> Result<PackedRtFrame, 
     packed.texels = texels;
     Ok(packed)
 }
+
+// ---- the other way: CPU buffers written into the GPU targets (tests drive one stage with the
+// CPU backend's inputs, so each stage is compared on its own) ----
+
+/// Writes raw texel bytes (rows tightly packed) into a whole texture.
+pub fn write_texture_bytes(ctx: &GpuContext, t: &Target, bytes: &[u8]) {
+    let texel = t.texture.format().block_copy_size(None).expect("colour format");
+    ctx.queue.write_texture(
+        t.texture.as_image_copy(),
+        bytes,
+        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(t.texture.width() * texel), rows_per_image: Some(t.texture.height()) },
+        t.texture.size(),
+    );
+}
+
+/// Writes RGBA values into an Rgba32Float or Rgba16Float target.
+pub fn write_rgba_f32(ctx: &GpuContext, t: &Target, values: &[Vec4]) {
+    match t.texture.format() {
+        wgpu::TextureFormat::Rgba32Float => write_texture_bytes(ctx, t, bytemuck::cast_slice(values)),
+        _ => {
+            let halfs: Vec<[half::f16; 4]> = values.iter().map(|v| v.to_array().map(half::f16::from_f32)).collect();
+            write_texture_bytes(ctx, t, bytemuck::cast_slice(&halfs));
+        }
+    }
+}
+
+/// Writes RGB values (alpha 1) into an Rgba32Float or Rgba16Float target.
+pub fn write_rgb(ctx: &GpuContext, t: &Target, values: &[Vec3]) {
+    let v: Vec<Vec4> = values.iter().map(|c| c.extend(1.0)).collect();
+    write_rgba_f32(ctx, t, &v);
+}
+
+/// Writes every G-buffer target but depth (Depth32Float cannot be a copy destination), the
+/// object ids and the mask included.
+pub fn write_gbuffer(ctx: &GpuContext, t: &FrameTargets, g: &GBuffer) {
+    write_rgb(ctx, &t.position, &g.position);
+    write_rgb(ctx, &t.normal, &g.normal);
+    write_rgb(ctx, &t.emission, &g.emission);
+    write_rgb(ctx, &t.ambient, &g.ambient);
+    write_rgba_f32(ctx, &t.diffuse, &g.diffuse);
+    write_rgba_f32(ctx, &t.specular, &g.specular);
+    write_rgb(ctx, &t.optical, &g.optical);
+    write_texture_bytes(ctx, &t.object_id, bytemuck::cast_slice(&g.object_id));
+    write_texture_bytes(ctx, &t.mask, bytemuck::cast_slice(&g.mask));
+}
+
+/// Writes lighting, shadow, reflection and refraction (not the final image).
+pub fn write_frame_buffers(ctx: &GpuContext, t: &FrameTargets, b: &FrameBuffers) {
+    write_rgb(ctx, &t.lighting, &b.lighting);
+    write_rgb(ctx, &t.shadow, &b.shadow);
+    write_rgb(ctx, &t.reflection, &b.reflection);
+    write_rgb(ctx, &t.refraction, &b.refraction);
+}

@@ -1,0 +1,1 @@
+//! `spheres`: (being written)
