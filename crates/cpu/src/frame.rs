@@ -8,8 +8,8 @@ pub use hybrid_core::Frame;
 use hybrid_core::depth_merge::{PackedRtFrame, unpack};
 use hybrid_core::report::{CapsuleReport, FrameReport, RayCounts, StageTimings};
 use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RtLayer};
-use hybrid_heuristic::{FrameInput, Heuristic, HeuristicReport, HeuristicSettings, ObjectInput, count_visible_pixels, write_mask};
-use hybrid_scene::{Budget, Camera, Scene};
+use hybrid_heuristic::{Heuristic, HeuristicReport, count_visible_pixels, frame_input, object_inputs, write_mask};
+use hybrid_scene::{Camera, Scene};
 
 use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, RtCapsule};
@@ -199,38 +199,10 @@ impl<'s> CpuRenderer<'s> {
             }
             Mode::Hybrid | Mode::All => {
                 let areas = count_visible_pixels(&gbuffer.object_id, self.scene.objects.len());
-                let materials = &self.scene.materials;
-                let objects: Vec<ObjectInput> = self
-                    .scene
-                    .objects
-                    .iter()
-                    .zip(&areas)
-                    .zip(&self.prepared.object_bounds)
-                    .map(|((o, &area), b)| ObjectInput {
-                        name: o.name.clone(),
-                        area,
-                        bbox_center: if b.is_empty() { o.transform.position } else { b.center() },
-                        reflective: o.is_reflective(materials),
-                        refractive: o.is_refractive(materials),
-                        relevance: o.relevance,
-                        cost: o.cost,
-                    })
-                    .collect();
-                let frame = FrameInput {
-                    view_proj: camera.view_projection(gbuffer.width as f32 / gbuffer.height as f32),
-                    camera_position: camera.position,
-                    light_count: self.scene.lights.count(),
-                };
-                let selection = if mode == Mode::All {
-                    // Heuristic off: the same quantities, every visible object selected.
-                    let settings = self.heuristic.settings().clone();
-                    self.heuristic.set_settings(HeuristicSettings { budget: Budget::Unlimited, ..settings.clone() });
-                    let selection = self.heuristic.run(&objects, &frame);
-                    self.heuristic.set_settings(settings);
-                    selection
-                } else {
-                    self.heuristic.run(&objects, &frame)
-                };
+                let objects = object_inputs(self.scene, &self.prepared.object_bounds, &areas);
+                let frame = frame_input(self.scene, camera, gbuffer.width, gbuffer.height);
+                let selection =
+                    if mode == Mode::All { self.heuristic.run_unlimited(&objects, &frame) } else { self.heuristic.run(&objects, &frame) };
                 write_mask(&gbuffer.object_id, &selection.selected, &mut gbuffer.mask);
                 Some(selection.report)
             }

@@ -69,6 +69,7 @@
 //! why an object lost its effects; the CLI writes it as JSON.
 
 mod pixels;
+mod scene_inputs;
 mod select;
 mod terms;
 
@@ -76,6 +77,7 @@ use serde::Serialize;
 
 pub use hybrid_scene::{Budget, HeuristicSettings, Policy};
 pub use pixels::{RT_SCENE_ID, SKY_ID, count_visible_pixels, write_mask};
+pub use scene_inputs::{frame_input, object_inputs};
 pub use select::{Candidate, select, select_knapsack, select_paper, select_restatement};
 pub use terms::{FrameInput, MIN_DISTANCE, ObjectInput, Terms, center_weight, distance, ray_count, terms};
 
