@@ -51,10 +51,9 @@ fn demo_gbuffer(w: u32, h: u32) -> (GBuffer, usize) {
 }
 
 /// Runs the count pass on `ids` (uploaded into the object-id target) and reads A back.
-fn gpu_counts(ctx: &GpuContext, w: u32, h: u32, ids: &[u32], object_count: u32) -> Vec<u64> {
+fn gpu_counts(ctx: &GpuContext, passes: &HeuristicPasses, w: u32, h: u32, ids: &[u32]) -> Vec<u64> {
     let targets = FrameTargets::new(&ctx.device, w, h);
     readback::write_texture_bytes(ctx, &targets.object_id, bytemuck::cast_slice(ids));
-    let passes = HeuristicPasses::new(ctx, object_count);
     let mut timer = StageTimer::new(ctx);
     timer.begin_frame();
     // Twice into the same encoder: the clear must reset the first pass's counts.
@@ -72,13 +71,14 @@ fn pixel_counts_match_the_cpu_on_the_demo_scene() {
     let (w, h) = (173, 97);
     let (g, objects) = demo_gbuffer(w, h);
     let cpu = count_visible_pixels(&g.object_id, objects);
-    let gpu = gpu_counts(&ctx, w, h, &g.object_id, objects as u32);
+    let passes = HeuristicPasses::new(&ctx, objects as u32);
+    let gpu = gpu_counts(&ctx, &passes, w, h, &g.object_id);
     eprintln!("demo {w}x{h}: {objects} objects, A = {cpu:?}");
     assert!(cpu.iter().filter(|&&a| a > 0).count() >= 3, "the demo view should show several objects: {cpu:?}");
     assert_eq!(gpu, cpu);
-    // A second, larger frame (the same passes, other targets).
+    // A second, larger frame: the same passes, other targets.
     let (g, _) = demo_gbuffer(320, 240);
-    assert_eq!(gpu_counts(&ctx, 320, 240, &g.object_id, objects as u32), count_visible_pixels(&g.object_id, objects));
+    assert_eq!(gpu_counts(&ctx, &passes, 320, 240, &g.object_id), count_visible_pixels(&g.object_id, objects));
 }
 
 /// Random runs of ids (0..40, sky, RT-scene) of 0 to 40 pixels, crossing rows and spans.
@@ -106,9 +106,11 @@ fn pixel_counts_match_the_cpu_on_random_ids() {
     // Fewer objects than ids in use: the higher ids must be dropped, as the CPU does.
     for objects in [40, 25, 1] {
         let cpu = count_visible_pixels(&ids, objects);
-        assert_eq!(gpu_counts(&ctx, w, h, &ids, objects as u32), cpu, "{objects} objects");
+        let passes = HeuristicPasses::new(&ctx, objects as u32);
+        assert_eq!(gpu_counts(&ctx, &passes, w, h, &ids), cpu, "{objects} objects");
     }
-    assert_eq!(gpu_counts(&ctx, w, h, &ids, 0), Vec::<u64>::new());
+    let passes = HeuristicPasses::new(&ctx, 0);
+    assert_eq!(gpu_counts(&ctx, &passes, w, h, &ids), Vec::<u64>::new());
 }
 
 /// Runs the mask pass for `selection` over `g`'s ids (the mask target starts at 0.5 everywhere,
@@ -177,7 +179,12 @@ fn gpu_blend(ctx: &GpuContext, g: &GBuffer, b: &FrameBuffers) -> (Vec<[u8; 4]>, 
     timer.begin_frame();
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     pass.encode(&mut encoder, &targets, &mut timer);
+    timer.resolve(&mut encoder);
     ctx.queue.submit([encoder.finish()]);
+    match timer.read(ctx).expect("timestamps read back") {
+        Some(t) => eprintln!("blend pass {}x{}: {:.3} ms GPU", g.width, g.height, t.blend),
+        None => eprintln!("no timestamp queries on this adapter"),
+    }
     let image = readback::read_rgba8(ctx, &targets.final_image).expect("final image read back");
     (image, targets)
 }
