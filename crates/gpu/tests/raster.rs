@@ -95,7 +95,7 @@ fn compare(name: &str, scene: &Scene, w: u32, h: u32) -> Comparison {
         if a != b {
             id_mismatches += 1;
             if worst.is_none() {
-                worst = Some((i % w as usize, i / w as usize, a, b));
+                worst = Some((i % w as usize, i / w as usize, a, b, cg.depth[i], gg.depth[i]));
             }
         } else if a != NO_OBJECT {
             max_depth_diff = max_depth_diff.max((cg.depth[i] - gg.depth[i]).abs());
@@ -131,7 +131,7 @@ fn compare(name: &str, scene: &Scene, w: u32, h: u32) -> Comparison {
         max_lighting_diff_same_gbuffer: same.iter().zip(&gb.lighting).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0, f32::max),
     };
     eprintln!(
-        "{name} {w}x{h}: object-id mismatches {} of {n} pixels ({:.3}%; first {worst:?} = (x, y, cpu, gpu)), covered {}, \
+        "{name} {w}x{h}: object-id mismatches {} of {n} pixels ({:.3}%; first {worst:?} = (x, y, cpu id, gpu id, cpu depth, gpu depth)), covered {}, \
          max |depth diff| {:.3e}, mean FLIP lighting {:.4}, diffuse {:.4}, normal {:.4}; \
          lighting of the GPU's G-buffer: mean FLIP {:.4}, max abs diff {:.3e}, max 8-bit code diff {}",
         c.id_mismatches,
@@ -182,4 +182,95 @@ fn sponza_spheres_matches_the_cpu() {
     let (w, h) = (160, 90);
     let c = compare("sponza-spheres", &scene, w, h);
     check("sponza-spheres", &c, w, h);
+}
+
+/// `clear = false` loads what is in the targets (the capsule's unpack pass writes the RT-scene
+/// pixels and their depth there): an occluder scene (a box in front of the camera, left half of
+/// the view) is rasterised first with `clear = true`, then the demo scene with `clear = false`.
+/// The CPU reference is the demo scene rasterised with the occluder's depth as its RT layer:
+/// where that layer wins (`RT_SCENE_OBJECT`) the GPU must still hold the occluder's pixel
+/// (its depth, its object id 0), everywhere else the demo's own object.
+#[test]
+fn load_keeps_nearer_pixels_already_in_the_targets() {
+    use hybrid_core::{RT_SCENE_OBJECT, RtLayer};
+    use hybrid_scene::{Material, primitives};
+
+    let demo = hybrid_scene::demo_scene();
+    let (w, h) = (160, 90);
+    let cam = &demo.camera;
+    let fwd = cam.forward();
+    let right = fwd.cross(Vec3::Y).normalize();
+    let centre = cam.position + fwd * 4.0 - right * 1.5;
+    let mut occluder = Scene::new(cam.clone());
+    occluder.materials.push(Material::default());
+    let mut mesh = primitives::cube();
+    // Thin in view depth, about 2 × 2 across; rotated to face the camera (yaw only).
+    let yaw = f32::atan2(fwd.x, fwd.z);
+    let rot = glam::Mat3::from_rotation_y(yaw);
+    for p in &mut mesh.positions {
+        *p = centre + rot * (*p * Vec3::new(2.0, 2.0, 0.2));
+    }
+    for n in &mut mesh.normals {
+        *n = rot * *n;
+    }
+    mesh.material = 0;
+    occluder.push_mesh_object("occluder", mesh);
+
+    let ctx = context();
+    let targets = FrameTargets::new(&ctx.device, w, h);
+    let mut timer = StageTimer::new(&ctx);
+    timer.begin_frame();
+    let prep_o = PreparedScene::new(&occluder);
+    let prep_d = PreparedScene::new(&demo);
+    let gpu_o = SceneGpu::new(&ctx, &prep_o).unwrap();
+    let gpu_d = SceneGpu::new(&ctx, &prep_d).unwrap();
+    gpu_o.write_uniforms(&ctx, cam, w, h, &occluder.environment);
+    gpu_d.write_uniforms(&ctx, cam, w, h, &demo.environment);
+    let raster_o = RasterPass::new(&ctx, &gpu_o);
+    let raster_d = RasterPass::new(&ctx, &gpu_d);
+    let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test") });
+    raster_o.encode(&mut encoder, &gpu_o, &targets, true, &mut timer);
+    raster_d.encode(&mut encoder, &gpu_d, &targets, false, &mut timer);
+    ctx.queue.submit([encoder.finish()]);
+    ctx.wait().unwrap();
+    let g = read_gbuffer(&ctx, &targets).unwrap();
+
+    let occ = hybrid_cpu::raster::rasterize(&prep_o, cam, w, h, None);
+    let layer = RtLayer { width: w, height: h, color: vec![Vec3::ONE; (w * h) as usize], depth: occ.depth.clone() };
+    let cpu = hybrid_cpu::raster::rasterize(&prep_d, cam, w, h, Some(&layer));
+    let n = (w * h) as usize;
+    let (mut occluded, mut mismatches, mut max_depth) = (0, 0, 0.0f32);
+    for i in 0..n {
+        let (want_id, want_depth) = if cpu.object_id[i] == RT_SCENE_OBJECT {
+            occluded += 1;
+            (0, occ.depth[i])
+        } else {
+            (cpu.object_id[i], cpu.depth[i])
+        };
+        if g.object_id[i] != want_id {
+            mismatches += 1;
+        } else if want_id != NO_OBJECT {
+            max_depth = max_depth.max((g.depth[i] - want_depth).abs());
+        }
+    }
+    let demo_pixels = cpu.object_id.iter().filter(|&&id| id != RT_SCENE_OBJECT && id != NO_OBJECT).count();
+    eprintln!(
+        "load: {occluded} pixels kept from the first pass, {demo_pixels} drawn over by the demo, {mismatches} object-id mismatches, \
+         max |depth diff| {max_depth:.3e}"
+    );
+    assert!(occluded > n / 10 && demo_pixels > n / 4, "occluder test scene covers {occluded}, demo {demo_pixels} pixels");
+    assert!(mismatches * 200 <= n, "{mismatches} object-id mismatches > 0.5 % of {n}");
+    assert!(max_depth < 1e-3, "depth differs by {max_depth}");
+}
+
+/// The other shipped asset scenes (real models and textures), same checks.
+#[test]
+fn asset_scenes_match_the_cpu() {
+    for name in ["sponza-armadillo.toml", "dining-room.toml", "pavilion.toml"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name);
+        let scene = hybrid_scene::load_scene(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let (w, h) = (160, 90);
+        let c = compare(name, &scene, w, h);
+        check(name, &c, w, h);
+    }
 }
