@@ -201,7 +201,7 @@ fn load_keeps_nearer_pixels_already_in_the_targets() {
     let fwd = cam.forward();
     let right = fwd.cross(Vec3::Y).normalize();
     let centre = cam.position + fwd * 4.0 - right * 1.5;
-    let mut occluder = Scene::new(cam.clone());
+    let mut occluder = Scene::new(*cam);
     occluder.materials.push(Material::default());
     let mut mesh = primitives::cube();
     // Thin in view depth, about 2 × 2 across; rotated to face the camera (yaw only).
