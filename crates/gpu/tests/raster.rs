@@ -274,3 +274,15 @@ fn asset_scenes_match_the_cpu() {
         check(name, &c, w, h);
     }
 }
+
+/// An orthographic camera (parallel view rays: `view_dir` and `primary_ray` take the other
+/// branch) on the demo scene, at an odd size (partial 8 × 8 workgroups at the borders).
+#[test]
+fn orthographic_demo_matches_the_cpu() {
+    let mut scene = hybrid_scene::demo_scene();
+    let (near, far) = scene.camera.near_far();
+    scene.camera.projection = hybrid_scene::Projection::Orthographic { height: 8.0, near, far };
+    let (w, h) = (123, 77);
+    let c = compare("demo (orthographic)", &scene, w, h);
+    check("demo (orthographic)", &c, w, h);
+}
