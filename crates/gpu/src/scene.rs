@@ -127,6 +127,14 @@ pub struct FrameUniforms {
     pub sky_faces1: [i32; 4],
     /// light count, object count, triangle count, unused.
     pub counts: [u32; 4],
+    /// The CPU capsule's ray generation (`hybrid_cpu::capsule::RayGen`), exactly: the view → world
+    /// rotation's columns (the transpose of the view matrix's rotation; w unused), so the GPU
+    /// capsule's rays and synthesized depths are bit-identical to the CPU's.
+    pub raygen_rot: [[f32; 4]; 3],
+    /// xyz the camera position exactly as given (not through an inverse matrix), w unused.
+    pub raygen_eye: [f32; 4],
+    /// The projection's x and y scales (P₀₀, P₁₁), near, far.
+    pub raygen_proj: [f32; 4],
 }
 
 impl FrameUniforms {
@@ -149,6 +157,8 @@ impl FrameUniforms {
             Skybox::Cube { faces } => (SKY_CUBE, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, faces.map(|f| f as i32)),
         };
         let v4 = |v: Vec3, w: f32| v.extend(w).to_array();
+        let rot = glam::Mat3::from_mat4(camera.view()).transpose();
+        let proj = camera.projection(aspect);
         Self {
             view_proj: vp.to_cols_array_2d(),
             inv_view_proj: vp.inverse().to_cols_array_2d(),
@@ -165,6 +175,9 @@ impl FrameUniforms {
             sky_faces0: [faces[0], faces[1], faces[2], faces[3]],
             sky_faces1: [faces[4], faces[5], kind as i32, 0],
             counts: [light_count, objects, triangles, 0],
+            raygen_rot: [v4(rot.x_axis, 0.0), v4(rot.y_axis, 0.0), v4(rot.z_axis, 0.0)],
+            raygen_eye: v4(camera.position, 0.0),
+            raygen_proj: [proj.x_axis.x, proj.y_axis.y, near, far],
         }
     }
 }

@@ -19,6 +19,9 @@ struct FrameUniforms {
     sky_faces0: vec4<i32>,
     sky_faces1: vec4<i32>,      // faces +Z, -Z, sky kind, -
     counts: vec4<u32>,          // lights, objects, triangles, -
+    raygen_rot: array<vec4<f32>, 3>, // the CPU capsule's RayGen: view → world rotation columns
+    raygen_eye: vec4<f32>,      // camera position exactly
+    raygen_proj: vec4<f32>,     // P00, P11, near, far
 }
 
 struct Vertex {
