@@ -3,7 +3,9 @@
 //! the G-buffer, each writing its buffer (shadow 1, reflection and refraction 0 where nothing is
 //! traced), with rays traversing the triangle BVH of [`crate::bvh`]. `shaders/trace.wgsl` turns
 //! listing 8c's recursion into a loop over a stack of pending rays, each carrying its weight in
-//! the (linear) eq. 5/6 combination. Rays are counted with atomics.
+//! the (linear) eq. 5/6 combination. Rays are counted with atomics. The RT-scene's spheres
+//! ([`crate::spheres`], group 2) are geometry too, as in the CPU's `trace_with_spheres`: opaque
+//! shadow casters, and seen (shaded as the capsule shades them) by secondary rays.
 
 use bytemuck::{Pod, Zeroable};
 use hybrid_core::report::RayCounts;
@@ -15,10 +17,11 @@ use crate::context::{GpuContext, GpuError};
 use crate::readback::read_buffer;
 use crate::scene::SceneGpu;
 use crate::shaders;
+use crate::spheres::{SPHERES_WGSL, SpheresGpu};
 use crate::targets::{COLOR_FORMAT, FrameTargets};
 use crate::timing::{Stage, StageTimer};
 
-/// The pass's own WGSL (after common.wgsl and bvh.wgsl).
+/// The pass's own WGSL (after common.wgsl, bvh.wgsl and spheres.wgsl).
 pub const TRACE_WGSL: &str = include_str!("shaders/trace.wgsl");
 
 /// The deepest secondary ray the GPU traces: the CPU's `MAX_TRACE_DEPTH` (64) capped by the
@@ -38,6 +41,7 @@ struct TraceParams {
 /// The three trace passes and what they share.
 pub struct TracePasses {
     device: wgpu::Device,
+    spheres: wgpu::BindGroup,
     bvh: TriangleBvhGpu,
     layout: wgpu::BindGroupLayout,
     shadow: wgpu::ComputePipeline,
@@ -51,7 +55,8 @@ pub struct TracePasses {
 const WORKGROUP: u32 = 8;
 
 impl TracePasses {
-    pub fn new(ctx: &GpuContext, scene: &SceneGpu, prepared: &PreparedScene) -> Result<Self, GpuError> {
+    /// `spheres`: the RT-scene's spheres (`SpheresGpu::empty` when the scene has no point clouds).
+    pub fn new(ctx: &GpuContext, scene: &SceneGpu, prepared: &PreparedScene, spheres: &SpheresGpu) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let bvh = TriangleBvhGpu::new(ctx, scene, prepared)?;
         let settings = &prepared.scene.trace;
@@ -124,10 +129,10 @@ impl TracePasses {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("trace"), entries: &entries });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("trace"),
-            bind_group_layouts: &[Some(&scene.layout), Some(&layout)],
+            bind_group_layouts: &[Some(&scene.layout), Some(&layout), Some(&spheres.layout)],
             immediate_size: 0,
         });
-        let module = shaders::module(device, "trace", &format!("{BVH_WGSL}\n{TRACE_WGSL}"));
+        let module = shaders::module(device, "trace", &format!("{BVH_WGSL}\n{SPHERES_WGSL}\n{TRACE_WGSL}"));
         let pipeline = |entry: &str| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(entry),
@@ -140,6 +145,7 @@ impl TracePasses {
         };
         Ok(Self {
             device: device.clone(),
+            spheres: spheres.bind_group.clone(),
             shadow: pipeline("shadow_main"),
             reflection: pipeline("reflection_main"),
             refraction: pipeline("refraction_main"),
@@ -192,6 +198,7 @@ impl TracePasses {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &scene.bind_group, &[]);
             pass.set_bind_group(1, &bind_group, &[]);
+            pass.set_bind_group(2, &self.spheres, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         encoder.copy_buffer_to_buffer(&self.counts, 0, &self.counts_readback, 0, 16);
@@ -212,7 +219,7 @@ mod tests {
 
     #[test]
     fn trace_wgsl_is_valid() {
-        if let Err(e) = validate(&with_common(&format!("{BVH_WGSL}\n{TRACE_WGSL}"))) {
+        if let Err(e) = validate(&with_common(&format!("{BVH_WGSL}\n{SPHERES_WGSL}\n{TRACE_WGSL}"))) {
             panic!("{e}");
         }
     }

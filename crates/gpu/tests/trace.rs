@@ -8,15 +8,20 @@ use hybrid_core::report::RayCounts;
 use hybrid_core::{FrameBuffers, GBuffer, NO_OBJECT, Surface};
 use hybrid_cpu::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
-use hybrid_cpu::trace::{TraceOutput, rt_only_gbuffer, trace};
+use hybrid_cpu::capsule::PointCloudCapsule;
+use hybrid_cpu::trace::{TraceOutput, rt_only_gbuffer, trace, trace_with_spheres};
 use hybrid_gpu::primary::PrimaryPass;
 use hybrid_gpu::readback::{read_frame_buffers, read_gbuffer, write_gbuffer};
 use hybrid_gpu::scene::SceneGpu;
+use hybrid_gpu::spheres::SpheresGpu;
 use hybrid_gpu::targets::FrameTargets;
 use hybrid_gpu::timing::StageTimer;
 use hybrid_gpu::trace::TracePasses;
 use hybrid_gpu::{AdapterChoice, GpuContext};
-use hybrid_scene::{Camera, ColorSpace, DirectionalLight, Environment, Lights, Material, Mesh, Projection, Scene, Skybox, Texture};
+use hybrid_scene::{
+    Camera, ColorSpace, DirectionalLight, Environment, Lights, Material, Mesh, PointCloud, PointColoring, Projection, Scene, Skybox,
+    Texture,
+};
 
 const SKY: Vec3 = Vec3::new(0.3, 0.6, 0.9);
 
@@ -24,14 +29,16 @@ fn context() -> GpuContext {
     GpuContext::new(AdapterChoice::Any).unwrap_or_else(|e| panic!("these tests need a GPU adapter (lavapipe will do): {e}"))
 }
 
-/// The GPU trace stage over `g`: (shadow, reflection, refraction buffers, ray counts).
+/// The GPU trace stage over `g`: (shadow, reflection, refraction buffers, ray counts). The
+/// scene's point clouds are traced as spheres.
 fn gpu_trace(ctx: &GpuContext, scene: &Scene, g: &GBuffer) -> (FrameBuffers, RayCounts) {
     let prepared = PreparedScene::new(scene);
     let sg = SceneGpu::new(ctx, &prepared).expect("scene upload");
+    let spheres = SpheresGpu::new(ctx, &scene.point_clouds).expect("spheres upload");
     let targets = FrameTargets::new(&ctx.device, g.width, g.height);
     write_gbuffer(ctx, &targets, g);
     sg.write_uniforms(ctx, &scene.camera, g.width, g.height, &scene.environment);
-    let passes = TracePasses::new(ctx, &sg, &prepared).expect("trace passes");
+    let passes = TracePasses::new(ctx, &sg, &prepared, &spheres).expect("trace passes");
     let mut timer = StageTimer::new(ctx);
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
     passes.encode(&mut encoder, &sg, &targets, &mut timer);
@@ -383,7 +390,7 @@ fn gpu_primary(ctx: &GpuContext, scene: &Scene, w: u32, h: u32) -> GBuffer {
     let sg = SceneGpu::new(ctx, &prepared).expect("scene upload");
     let targets = FrameTargets::new(&ctx.device, w, h);
     sg.write_uniforms(ctx, &scene.camera, w, h, &scene.environment);
-    let passes = TracePasses::new(ctx, &sg, &prepared).expect("trace passes");
+    let passes = TracePasses::new(ctx, &sg, &prepared, &SpheresGpu::empty(ctx)).expect("trace passes");
     let primary = PrimaryPass::new(ctx, &sg, passes.bvh());
     let mut timer = StageTimer::new(ctx);
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -465,7 +472,7 @@ fn primary_pass_loads_and_depth_tests_against_what_is_there() {
         let prepared = PreparedScene::new(s);
         let sg = SceneGpu::new(&ctx, &prepared).expect("scene upload");
         sg.write_uniforms(&ctx, &s.camera, w, h, &s.environment);
-        let passes = TracePasses::new(&ctx, &sg, &prepared).expect("trace passes");
+        let passes = TracePasses::new(&ctx, &sg, &prepared, &SpheresGpu::empty(&ctx)).expect("trace passes");
         let primary = PrimaryPass::new(&ctx, &sg, passes.bvh());
         timer.begin_frame();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -481,4 +488,50 @@ fn primary_pass_loads_and_depth_tests_against_what_is_there() {
     // Outside the near quad the far scene's back wall (object 1) fills every pixel.
     assert_eq!(merged.object_id[0], 1);
     assert!(merged.depth[0] > 0.0 && merged.depth[0] < first.depth[centre]);
+}
+
+// ---- phase 2: the RT-scene's spheres in the trace (as the CPU's trace_with_spheres) ----
+
+#[test]
+fn spheres_block_shadows_and_show_in_reflections_and_refractions_as_on_the_cpu() {
+    let ctx = context();
+    let mut s = busy_scene();
+    // A block of 12×8×6 small spheres between the boxes and the camera, above the floor: they
+    // shadow the floor, show in the mirror box and through the glass box.
+    let mut points = Vec::new();
+    for i in 0..12 {
+        for j in 0..8 {
+            for k in 0..6 {
+                points.push(Vec3::new(-0.9 + i as f32 * 0.15, 0.4 + j as f32 * 0.12, 0.7 + k as f32 * 0.12));
+            }
+        }
+    }
+    s.point_clouds.push(PointCloud {
+        name: "block".into(),
+        source: "block.ply".into(),
+        points,
+        colors: Vec::new(),
+        radius: 0.04,
+        coloring: PointColoring::Height,
+        specular: Vec3::splat(0.2),
+        shininess: 0.5,
+    });
+    let (w, h) = (128, 96);
+    let prepared = PreparedScene::new(&s);
+    let bvh = SceneBvh::build(&prepared);
+    let g = rt_only_gbuffer(&prepared, &bvh, &s.camera, w, h);
+    let capsule = PointCloudCapsule::new(&s.point_clouds, s.lights.clone(), s.environment.clone()).expect("capsule");
+    let cpu = trace_with_spheres(&prepared, &bvh, Some(&capsule), &g, &s.camera);
+    let without = trace(&prepared, &bvh, &g, &s.camera);
+    let changed = |a: &[Vec3], b: &[Vec3]| a.iter().zip(b).filter(|(x, y)| (**x - **y).abs().max_element() > 0.01).count();
+    let (cs, cm, cr) = (
+        changed(&cpu.shadow, &without.shadow),
+        changed(&cpu.reflection, &without.reflection),
+        changed(&cpu.refraction, &without.refraction),
+    );
+    eprintln!("spheres change {cs} shadow, {cm} reflection, {cr} refraction pixels on the CPU");
+    assert!(cs > 50 && cm > 20 && cr > 20, "the test scene must exercise the spheres");
+    let (gpu, rays) = gpu_trace(&ctx, &s, &g);
+    let worst = compare("spheres", w, h, &cpu, &gpu, rays);
+    assert!(worst <= 0.02, "spheres: mean FLIP {worst} > 0.02");
 }

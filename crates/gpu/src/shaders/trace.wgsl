@@ -1,5 +1,6 @@
-// trace.wgsl — stage 3 (paper 1 listings 8a–d), the twin of hybrid-cpu's `trace.rs`. Needs
-// common.wgsl and bvh.wgsl before it. Three entry points, one compute pass each: shadow,
+// trace.wgsl — stage 3 (paper 1 listings 8a–d), the twin of hybrid-cpu's `trace.rs`
+// (`trace_with_spheres`: the RT-scene's spheres block shadow rays and are seen by secondary
+// rays). Needs common.wgsl, bvh.wgsl (group 1) and spheres.wgsl (group 2) before it. Three entry points, one compute pass each: shadow,
 // reflection, refraction, over every pixel (pixels with mask 0 get 1 / 0 / 0).
 //
 // WGSL has no recursion: listing 8c's tree of secondary rays is walked with a small stack of
@@ -120,12 +121,22 @@ fn trace_secondary(origin: vec3<f32>, dir: vec3<f32>, importance: f32, kind: u32
         } else {
             (*rays).y += 1u;
         }
+        // The nearer of the closest triangle and the closest sphere (a sphere wins a tie).
         let hit = closest_hit(r.origin, r.dir, 0.0, FAR_AWAY);
-        if hit.tri == NO_HIT {
+        var sphere_tmax = FAR_AWAY;
+        if hit.tri != NO_HIT {
+            sphere_tmax = hit.t;
+        }
+        let sphere = sphere_closest_hit(r.origin, r.dir, 0.0, sphere_tmax);
+        var s: Surface;
+        if sphere.hit {
+            s = sphere_surface(sphere.index, r.origin + r.dir * sphere.t, r.dir);
+        } else if hit.tri != NO_HIT {
+            s = triangle_surface_at(hit.tri, hit.bary, 0.0);
+        } else {
             color += r.weight * sky(r.dir);
             continue;
         }
-        let s = triangle_surface_at(hit.tri, hit.bary, 0.0);
         let om = s.reflectivity;
         let or = 1.0 - s.opacity;
         var lighting = vec3<f32>(0.0);
@@ -189,7 +200,11 @@ fn shadow_main(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
                 rays += 1u;
                 let origin = offset_origin(s.position, s.normal, inc.dir);
-                let att = shadow_attenuation(origin, inc.dir, inc.distance);
+                var att = shadow_attenuation(origin, inc.dir, inc.distance);
+                // Spheres are opaque casters.
+                if att > 0.0 && sphere_any_hit(origin, inc.dir, 0.0, inc.distance) {
+                    att = 0.0;
+                }
                 if att < 1.0 {
                     shadow -= blinn_phong(i, s, view) * (1.0 - att);
                 }
