@@ -239,6 +239,43 @@ fn probe() {
     }
 
     #[test]
+    fn flattened_tree_holds_every_triangle_once_inside_its_boxes() {
+        let scene = hybrid_scene::file::demo_scene();
+        let prepared = PreparedScene::new(&scene);
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        for (mi, m) in prepared.meshes.iter().enumerate() {
+            let base = vertices.len() as u32;
+            vertices.extend(m.positions.iter().map(|p| GpuVertex { position: p.extend(1.0).to_array(), ..GpuVertex::zeroed() }));
+            triangles.extend(m.indices.iter().map(|t| GpuTriangle { v: t.map(|i| base + i), mesh: mi as u32 }));
+        }
+        let flat = FlatBvh::build(&triangles, &vertices, &prepared);
+        assert!(flat.depth as usize <= STACK_SIZE && triangles.len() > 100);
+        let mut seen = vec![0u32; triangles.len()];
+        let mut todo = vec![(0usize, [f32::NEG_INFINITY; 3], [f32::INFINITY; 3])];
+        let inside = |lo: &[f32], hi: &[f32], p: &[f32]| (0..3).all(|a| lo[a] <= p[a] && p[a] <= hi[a]);
+        while let Some((i, plo, phi)) = todo.pop() {
+            let n = flat.nodes[i];
+            let (lo, hi) = (&n.min[..3], &n.max[..3]);
+            assert!(inside(&plo, &phi, lo) && inside(&plo, &phi, hi), "node {i} leaves its parent's box");
+            let (first, count) = (n.min[3].to_bits() as usize, n.max[3].to_bits() as usize);
+            if count == 0 {
+                todo.push((first, [lo[0], lo[1], lo[2]], [hi[0], hi[1], hi[2]]));
+                todo.push((first + 1, [lo[0], lo[1], lo[2]], [hi[0], hi[1], hi[2]]));
+                continue;
+            }
+            for t in &flat.tris[first..first + count] {
+                let tri = t.v0[3].to_bits() as usize;
+                seen[tri] += 1;
+                let corners = triangles[tri].v.map(|v| vertices[v as usize].position);
+                assert!(corners.iter().all(|c| inside(lo, hi, &c[..3])), "triangle {tri} outside its leaf");
+                let material = prepared.meshes[triangles[tri].mesh as usize].material;
+                assert_eq!(t.e1[3], material_shadow(&scene.materials[material], &scene.textures));
+            }
+        }
+        assert!(seen.iter().all(|&k| k == 1), "every triangle in exactly one leaf");
+    }
+
+    #[test]
     fn shadow_classes_match_the_cpu_rules() {
         let tex = |alphas: [u8; 4]| Texture::new("t", 2, 2, alphas.map(|a| [200, 100, 50, a]).to_vec(), hybrid_scene::ColorSpace::Srgb);
         let textures = vec![tex([255; 4]), tex([255, 255, 0, 255]), tex([128; 4])];
