@@ -1,1 +1,129 @@
-//! `primary`: (being written)
+//! `primary`: the `rt-only` mode's G-buffer from primary rays instead of the raster (the twin of
+//! hybrid-cpu's `trace::rt_only_gbuffer`). One render pass draws a full-screen triangle whose
+//! fragment shader (`shaders/primary.wgsl`) traces its pixel centre's ray through the triangle
+//! BVH and writes the raster pass's 8 colour targets plus the hit's depth (projected with the
+//! frame's view-projection, reversed-Z, depth-tested Greater so an RT-scene layer already in the
+//! depth buffer is merged as the raster would); misses are discarded.
+
+use crate::bvh::{BVH_WGSL, TriangleBvhGpu};
+use crate::context::GpuContext;
+use crate::scene::SceneGpu;
+use crate::shaders;
+use crate::targets::{DEPTH_FORMAT, FrameTargets, GBUFFER_COLOR_FORMATS};
+use crate::timing::{Stage, StageTimer};
+
+/// The pass's own WGSL (after common.wgsl and bvh.wgsl).
+pub const PRIMARY_WGSL: &str = include_str!("shaders/primary.wgsl");
+
+/// The primary-ray G-buffer pass.
+pub struct PrimaryPass {
+    pipeline: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+}
+
+impl PrimaryPass {
+    pub fn new(ctx: &GpuContext, scene: &SceneGpu, bvh: &TriangleBvhGpu) -> Self {
+        let device = &ctx.device;
+        let entries = TriangleBvhGpu::layout_entries(wgpu::ShaderStages::FRAGMENT);
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("primary"), entries: &entries });
+        let bind_group =
+            device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("primary"), layout: &layout, entries: &bvh.bind_entries() });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("primary"),
+            bind_group_layouts: &[Some(&scene.layout), Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = shaders::module(device, "primary", &format!("{BVH_WGSL}\n{PRIMARY_WGSL}"));
+        let targets: Vec<Option<wgpu::ColorTargetState>> = GBUFFER_COLOR_FORMATS
+            .iter()
+            .map(|&format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL }))
+            .collect();
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("primary"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("primary_vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("primary_fs"),
+                compilation_options: Default::default(),
+                targets: &targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self { pipeline, bind_group }
+    }
+
+    /// The G-buffer (8 colour targets + depth) of `targets` from primary rays. `clear`: clear
+    /// everything first (object id to `NO_OBJECT`, depth to 0 = far, the rest to 0); else load
+    /// what is there (the RT-scene layer) and depth-test against it.
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &SceneGpu,
+        targets: &FrameTargets,
+        clear: bool,
+        timer: &mut StageTimer,
+    ) {
+        let views = targets.gbuffer_color_views();
+        let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
+            .iter()
+            .enumerate()
+            .map(|(k, view)| {
+                let clear_value = if k == 7 { f64::from(u32::MAX) } else { 0.0 };
+                let load =
+                    if clear { wgpu::LoadOp::Clear(wgpu::Color { r: clear_value, g: 0.0, b: 0.0, a: 0.0 }) } else { wgpu::LoadOp::Load };
+                Some(wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
+                })
+            })
+            .collect();
+        let depth_load = if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("primary"),
+            color_attachments: &attachments,
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &targets.depth.view,
+                depth_ops: Some(wgpu::Operations { load: depth_load, store: wgpu::StoreOp::Store }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: timer.render(Stage::Raster),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &scene.bind_group, &[]);
+        pass.set_bind_group(1, &self.bind_group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shaders::{validate, with_common};
+
+    #[test]
+    fn primary_wgsl_is_valid() {
+        if let Err(e) = validate(&with_common(&format!("{BVH_WGSL}\n{PRIMARY_WGSL}"))) {
+            panic!("{e}");
+        }
+    }
+}

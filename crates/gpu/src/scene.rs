@@ -306,7 +306,7 @@ impl SceneGpu {
                 });
             }
             // Empty arrays still need a buffer: bind one element of zeros.
-            let zeros = [0u8; 80];
+            let zeros = [0u8; 128];
             let contents = if bytes.is_empty() { &zeros[..] } else { bytes };
             Ok(device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
