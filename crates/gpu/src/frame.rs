@@ -1,1 +1,283 @@
-//! `frame`: (being written)
+//! The GPU frame: DESIGN §1's stages as GPU passes, called in the same order as the CPU frame
+//! (`hybrid_cpu::frame`). `GpuRenderer::render` is the whole frame on one screen; each stage is
+//! its own module with explicit inputs (the scene's group 0, the frame's targets) and outputs
+//! (targets it writes). One read-back sits in the middle: the heuristic's pixel counts.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use hybrid_core::report::{AdapterReport, FrameReport, RayCounts, StageTimings};
+use hybrid_core::{Frame, FrameSettings, Mode};
+use hybrid_cpu::prepare::PreparedScene;
+use hybrid_heuristic::{Heuristic, HeuristicReport, frame_input, object_inputs};
+use hybrid_scene::{Camera, Scene};
+
+use crate::blend::BlendPass;
+use crate::capsule::GpuCapsule;
+use crate::context::{GpuContext, GpuError};
+use crate::heuristic::{HeuristicPasses, MaskSelection};
+use crate::lighting::LightingPass;
+use crate::primary::PrimaryPass;
+use crate::raster::RasterPass;
+use crate::readback;
+use crate::scene::SceneGpu;
+use crate::spheres::SpheresGpu;
+use crate::targets::FrameTargets;
+use crate::timing::StageTimer;
+use crate::trace::TracePasses;
+
+/// The GPU backend with everything it keeps between frames: the scene on the GPU (buffers,
+/// BVHs, textures), the pipelines of every stage, the frame's targets and the heuristic's state.
+pub struct GpuRenderer<'s> {
+    ctx: Arc<GpuContext>,
+    scene: &'s Scene,
+    prepared: PreparedScene<'s>,
+    gpu_scene: SceneGpu,
+    spheres: SpheresGpu,
+    capsule: Option<GpuCapsule>,
+    raster: RasterPass,
+    primary: PrimaryPass,
+    lighting: LightingPass,
+    heuristic_passes: HeuristicPasses,
+    trace: TracePasses,
+    /// The trace stage bound to no spheres (`spheres_in_trace = false`; scenes with point clouds).
+    trace_without_spheres: Option<TracePasses>,
+    blend: BlendPass,
+    heuristic: Heuristic,
+    targets: Option<FrameTargets>,
+    timer: StageTimer,
+    /// Host milliseconds spent building and uploading the scene (BVHs included).
+    pub prepare_ms: f64,
+    /// Beyond paper 2: the point-cloud spheres cast shadows on polygons and appear in
+    /// reflections and refractions (default on). Off gives the paper's behaviour (the RT-scene
+    /// only merges by depth): a faster trace stage, at the cost of those effects.
+    pub spheres_in_trace: bool,
+}
+
+impl<'s> GpuRenderer<'s> {
+    /// Uploads `scene` once: vertices, materials, textures, lights, the triangle BVH and the
+    /// point clouds' sphere BVH, and builds every stage's pipeline.
+    pub fn new(ctx: Arc<GpuContext>, scene: &'s Scene) -> Result<Self, GpuError> {
+        let start = Instant::now();
+        let prepared = PreparedScene::new(scene);
+        let gpu_scene = SceneGpu::new(&ctx, &prepared)?;
+        let spheres = if scene.point_clouds.is_empty() { SpheresGpu::empty(&ctx) } else { SpheresGpu::new(&ctx, &scene.point_clouds)? };
+        let capsule = (!scene.point_clouds.is_empty()).then(|| GpuCapsule::new(&ctx, &gpu_scene, &spheres));
+        let no_spheres = SpheresGpu::empty(&ctx);
+        let trace = TracePasses::new(&ctx, &gpu_scene, &prepared, &spheres)?;
+        let trace_without_spheres =
+            if scene.point_clouds.is_empty() { None } else { Some(TracePasses::new(&ctx, &gpu_scene, &prepared, &no_spheres)?) };
+        Ok(Self {
+            raster: RasterPass::new(&ctx, &gpu_scene),
+            primary: PrimaryPass::new(&ctx, &gpu_scene, trace.bvh()),
+            lighting: LightingPass::new(&ctx, &gpu_scene),
+            heuristic_passes: HeuristicPasses::new(&ctx, scene.objects.len() as u32),
+            blend: BlendPass::new(&ctx),
+            timer: StageTimer::new(&ctx),
+            heuristic: Heuristic::new(scene.heuristic.clone()),
+            targets: None,
+            prepare_ms: start.elapsed().as_secs_f64() * 1e3,
+            spheres_in_trace: true,
+            trace,
+            trace_without_spheres,
+            capsule,
+            spheres,
+            gpu_scene,
+            prepared,
+            scene,
+            ctx,
+        })
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    pub fn prepared(&self) -> &PreparedScene<'s> {
+        &self.prepared
+    }
+
+    /// Renders one frame and reads every buffer back (for the image, dumps and tests).
+    /// `on_stage` is told each stage's name as it is recorded.
+    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Result<Frame, GpuError> {
+        let (w, h) = (settings.width, settings.height);
+        let targets = match self.targets.take() {
+            Some(t) if t.width == w && t.height == h => t,
+            _ => FrameTargets::new(&self.ctx.device, w, h),
+        };
+        let result = self.render_into(&targets, camera, settings, on_stage);
+        let frame = result.and_then(|(report_parts, wall)| {
+            let gbuffer = readback::read_gbuffer(&self.ctx, &targets)?;
+            let buffers = readback::read_frame_buffers(&self.ctx, &targets)?;
+            let rt_packed = if self.capsule.is_some() { Some(readback::read_packed(&self.ctx, &targets)?) } else { None };
+            let mut report = report_parts;
+            report.timings_ms.frame = wall;
+            Ok(Frame { settings, gbuffer, buffers, rt_packed, report })
+        });
+        self.targets = Some(targets);
+        frame
+    }
+
+    /// The frame's passes into `targets`: returns the report and the wall-clock ms of the frame
+    /// (submission to completion, read-backs of buffers not included).
+    fn render_into(
+        &mut self,
+        targets: &FrameTargets,
+        camera: &Camera,
+        settings: FrameSettings,
+        on_stage: &mut dyn FnMut(&str),
+    ) -> Result<(FrameReport, f64), GpuError> {
+        let start = Instant::now();
+        let (w, h, mode) = (settings.width, settings.height, settings.mode);
+        let device = &self.ctx.device;
+        self.gpu_scene.write_uniforms(&self.ctx, camera, w, h, &self.scene.environment);
+        self.timer.begin_frame();
+
+        // First submission: stages 0–1 and the pixel count of stage 2.
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame: capsule, raster, count") });
+        on_stage("capsule");
+        if let Some(capsule) = &self.capsule {
+            capsule.encode(&mut enc, &self.gpu_scene, &self.spheres, targets, &mut self.timer);
+            capsule.encode_unpack(&mut enc, &self.gpu_scene, targets, &mut self.timer);
+        }
+        on_stage("raster");
+        let clear = self.capsule.is_none();
+        if mode == Mode::RtOnly {
+            self.primary.encode(&mut enc, &self.gpu_scene, targets, clear, &mut self.timer);
+        } else {
+            self.raster.encode(&mut enc, &self.gpu_scene, targets, clear, &mut self.timer);
+        }
+        self.lighting.encode(&mut enc, &self.gpu_scene, targets, &mut self.timer);
+        on_stage("heuristic");
+        let counting = matches!(mode, Mode::Hybrid | Mode::All);
+        if counting {
+            self.heuristic_passes.encode_count(&mut enc, targets, &mut self.timer);
+        }
+        self.ctx.queue.submit([enc.finish()]);
+
+        // Stage 2 on the host: A per object → the shared heuristic → the mask pass.
+        let heuristic_start = Instant::now();
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame: mask, trace, blend") });
+        let heuristic_report = self.heuristic_stage(&mut enc, targets, camera, mode)?;
+        let heuristic_host_ms = heuristic_start.elapsed().as_secs_f64() * 1e3;
+
+        on_stage("trace");
+        if mode == Mode::Raster {
+            clear_trace_outputs(&mut enc, targets);
+        } else {
+            let trace = match &self.trace_without_spheres {
+                Some(t) if !self.spheres_in_trace => t,
+                _ => &self.trace,
+            };
+            trace.encode(&mut enc, &self.gpu_scene, targets, &mut self.timer);
+        }
+        on_stage("blend");
+        self.blend.encode(&mut enc, targets, &mut self.timer);
+        self.timer.resolve(&mut enc);
+        let second = Instant::now();
+        self.ctx.queue.submit([enc.finish()]);
+        self.ctx.wait()?;
+        let second_ms = second.elapsed().as_secs_f64() * 1e3;
+        let wall = start.elapsed().as_secs_f64() * 1e3;
+
+        let gpu_timings = self.timer.read(&self.ctx)?;
+        let mut rays = if mode == Mode::Raster { RayCounts::default() } else { self.trace_passes().read_ray_counts(&self.ctx)? };
+        if mode == Mode::RtOnly {
+            rays.primary = w as u64 * h as u64;
+        }
+        // Host-side stage times: GPU times where timestamps exist (the passes run back to back
+        // inside two submissions, so host time per stage is not observable); the heuristic's
+        // entry is its host part (read-back, selection) plus its GPU passes.
+        let mut timings = gpu_timings.unwrap_or(StageTimings { trace: second_ms, ..Default::default() });
+        timings.heuristic += heuristic_host_ms;
+        if mode == Mode::Hybrid {
+            self.heuristic.record_trace(heuristic_report.as_ref().map_or(0.0, |r| r.spent), timings.trace);
+        }
+        let capsule = self.capsule.as_ref().map(|c| {
+            let mut r = c.report();
+            r.trace_ms = gpu_timings.map_or(0.0, |g| g.capsule);
+            r
+        });
+        let s = &self.ctx.summary;
+        let report = FrameReport {
+            backend: "gpu".into(),
+            size: [w, h],
+            mode,
+            timings_ms: timings,
+            rays,
+            triangles: self.prepared.triangles.len() as u64,
+            objects: self.scene.objects.len() as u64,
+            heuristic: heuristic_report,
+            capsule,
+            gpu_timings_ms: gpu_timings,
+            adapter: Some(AdapterReport {
+                name: s.name.clone(),
+                backend: s.backend.clone(),
+                device_type: s.device_type.clone(),
+                driver: s.driver.clone(),
+            }),
+        };
+        Ok((report, wall))
+    }
+
+    /// The trace stage with or without the point-cloud spheres (`spheres_in_trace`).
+    fn trace_passes(&self) -> &TracePasses {
+        match &self.trace_without_spheres {
+            Some(t) if !self.spheres_in_trace => t,
+            _ => &self.trace,
+        }
+    }
+
+    /// Stage 2: read A per object back, run the shared heuristic (modes hybrid and all), and
+    /// record the mask pass. rt-only masks every covered pixel; raster masks nothing.
+    fn heuristic_stage(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        targets: &FrameTargets,
+        camera: &Camera,
+        mode: Mode,
+    ) -> Result<Option<HeuristicReport>, GpuError> {
+        let ctx = &self.ctx;
+        match mode {
+            Mode::Raster => {
+                self.heuristic_passes.encode_mask(ctx, enc, targets, MaskSelection::Nothing, &mut self.timer);
+                Ok(None)
+            }
+            Mode::RtOnly => {
+                self.heuristic_passes.encode_mask(ctx, enc, targets, MaskSelection::AllCovered, &mut self.timer);
+                Ok(None)
+            }
+            Mode::Hybrid | Mode::All => {
+                let areas = self.heuristic_passes.read_counts(ctx)?;
+                let objects = object_inputs(self.scene, &self.prepared.object_bounds, &areas);
+                let frame = frame_input(self.scene, camera, targets.width, targets.height);
+                let selection =
+                    if mode == Mode::All { self.heuristic.run_unlimited(&objects, &frame) } else { self.heuristic.run(&objects, &frame) };
+                self.heuristic_passes.encode_mask(ctx, enc, targets, MaskSelection::Objects(&selection.selected), &mut self.timer);
+                Ok(Some(selection.report))
+            }
+        }
+    }
+}
+
+/// Raster mode traces nothing: shadow 1 (nothing blocked), reflection and refraction 0, as the
+/// CPU backend's buffers.
+fn clear_trace_outputs(enc: &mut wgpu::CommandEncoder, targets: &FrameTargets) {
+    let attach = |view, c: f64| {
+        Some(wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color { r: c, g: c, b: c, a: 1.0 }), store: wgpu::StoreOp::Store },
+        })
+    };
+    let _pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some("trace: nothing traced"),
+        color_attachments: &[
+            attach(&targets.shadow.view, 1.0),
+            attach(&targets.reflection.view, 0.0),
+            attach(&targets.refraction.view, 0.0),
+        ],
+        ..Default::default()
+    });
+}

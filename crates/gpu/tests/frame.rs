@@ -1,0 +1,88 @@
+//! The whole GPU frame against the CPU backend (the oracle), buffer by buffer, on whatever
+//! adapter wgpu finds (lavapipe in CI): the demo scene in every mode, and every shipped scene in
+//! every mode at a small size. Fails when no adapter exists.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use hybrid_core::{Frame, FrameSettings, Mode};
+use hybrid_cpu::frame::CpuRenderer;
+use hybrid_gpu::frame::GpuRenderer;
+use hybrid_gpu::{AdapterChoice, GpuContext};
+use hybrid_scene::{Scene, demo_scene, load_scene};
+
+mod support;
+use support::{BufferComparison, compare_frames};
+
+fn context() -> Arc<GpuContext> {
+    Arc::new(GpuContext::new(AdapterChoice::Any).unwrap_or_else(|e| panic!("the GPU tests need a wgpu adapter: {e}")))
+}
+
+fn render_both(ctx: &Arc<GpuContext>, scene: &Scene, mode: Mode, w: u32, h: u32) -> (Frame, Frame) {
+    let settings = FrameSettings { width: w, height: h, mode };
+    let mut cpu = CpuRenderer::new(scene).unwrap();
+    let mut gpu = GpuRenderer::new(ctx.clone(), scene).unwrap_or_else(|e| panic!("{e}"));
+    let c = cpu.render(&scene.camera, settings, &mut |_| {});
+    let g = gpu.render(&scene.camera, settings, &mut |_| {}).unwrap_or_else(|e| panic!("{e}"));
+    (c, g)
+}
+
+/// Every buffer within mean FLIP 0.02 of the CPU's; object ids and the mask identical but for
+/// `id_slack` pixels (rasterizer sub-pixel rules at triangle edges).
+fn assert_matches(name: &str, mode: Mode, c: &Frame, g: &Frame, id_slack: f64) -> BufferComparison {
+    let cmp = compare_frames(c, g);
+    eprintln!("{name} {mode}: {cmp}");
+    let n = c.gbuffer.len() as f64;
+    for (buffer, flip) in &cmp.flip {
+        assert!(*flip <= 0.02, "{name} {mode}: {buffer} mean FLIP {flip:.4} > 0.02");
+    }
+    assert!(cmp.object_id_mismatches as f64 <= id_slack * n, "{name} {mode}: {} object ids differ", cmp.object_id_mismatches);
+    assert!(cmp.mask_mismatches as f64 <= id_slack * n, "{name} {mode}: {} mask pixels differ", cmp.mask_mismatches);
+    cmp
+}
+
+#[test]
+fn demo_scene_matches_the_cpu_in_every_mode() {
+    let ctx = context();
+    let scene = demo_scene();
+    for mode in Mode::ALL {
+        let (c, g) = render_both(&ctx, &scene, mode, 160, 90);
+        assert_matches("demo", mode, &c, &g, 0.002);
+        assert_eq!(g.report.backend, "gpu");
+        assert!(g.report.adapter.is_some());
+        if mode != Mode::Raster {
+            assert!(g.report.rays.shadow > 0, "demo {mode}: the GPU traced no shadow rays");
+        }
+    }
+}
+
+fn asset_scene(name: &str) {
+    let ctx = context();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name);
+    let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    for mode in Mode::ALL {
+        let (c, g) = render_both(&ctx, &scene, mode, 96, 54);
+        assert_matches(name, mode, &c, &g, 0.01);
+    }
+}
+
+#[test]
+fn sponza_spheres_matches_the_cpu() {
+    asset_scene("sponza-spheres.toml");
+}
+#[test]
+fn sponza_armadillo_matches_the_cpu() {
+    asset_scene("sponza-armadillo.toml");
+}
+#[test]
+fn dining_room_matches_the_cpu() {
+    asset_scene("dining-room.toml");
+}
+#[test]
+fn pavilion_matches_the_cpu() {
+    asset_scene("pavilion.toml");
+}
+#[test]
+fn tree_merge_matches_the_cpu() {
+    asset_scene("tree-merge.toml");
+}
