@@ -27,14 +27,16 @@ fn render_both(ctx: &Arc<GpuContext>, scene: &Scene, mode: Mode, w: u32, h: u32)
     (c, g)
 }
 
-/// Every buffer within mean FLIP 0.02 of the CPU's; object ids and the mask identical but for
-/// `id_slack` pixels (rasterizer sub-pixel rules at triangle edges).
-fn assert_matches(name: &str, mode: Mode, c: &Frame, g: &Frame, id_slack: f64) -> BufferComparison {
+/// Every buffer within mean FLIP 0.02 of the CPU's (`loose` buffers: their own limit); object
+/// ids and the mask identical but for `id_slack` of the pixels (depth ties between coplanar
+/// surfaces, which the two rasterizers' arithmetic may break differently).
+fn assert_matches(name: &str, mode: Mode, c: &Frame, g: &Frame, id_slack: f64, loose: &[(&str, f32)]) -> BufferComparison {
     let cmp = compare_frames(c, g);
     eprintln!("{name} {mode}: {cmp}");
     let n = c.gbuffer.len() as f64;
     for (buffer, flip) in &cmp.flip {
-        assert!(*flip <= 0.02, "{name} {mode}: {buffer} mean FLIP {flip:.4} > 0.02");
+        let limit = loose.iter().find(|(b, _)| b == buffer).map_or(0.02, |l| l.1);
+        assert!(*flip <= limit, "{name} {mode}: {buffer} mean FLIP {flip:.4} > {limit}");
     }
     assert!(cmp.object_id_mismatches as f64 <= id_slack * n, "{name} {mode}: {} object ids differ", cmp.object_id_mismatches);
     assert!(cmp.mask_mismatches as f64 <= id_slack * n, "{name} {mode}: {} mask pixels differ", cmp.mask_mismatches);
@@ -47,7 +49,7 @@ fn demo_scene_matches_the_cpu_in_every_mode() {
     let scene = demo_scene();
     for mode in Mode::ALL {
         let (c, g) = render_both(&ctx, &scene, mode, 160, 90);
-        assert_matches("demo", mode, &c, &g, 0.002);
+        assert_matches("demo", mode, &c, &g, 0.0, &[]);
         assert_eq!(g.report.backend, "gpu");
         assert!(g.report.adapter.is_some());
         if mode != Mode::Raster {
@@ -56,33 +58,39 @@ fn demo_scene_matches_the_cpu_in_every_mode() {
     }
 }
 
-fn asset_scene(name: &str) {
+fn asset_scene(name: &str, loose: &[(&str, f32)]) {
     let ctx = context();
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name);
     let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
     for mode in Mode::ALL {
         let (c, g) = render_both(&ctx, &scene, mode, 96, 54);
-        assert_matches(name, mode, &c, &g, 0.01);
+        assert_matches(name, mode, &c, &g, 0.002, loose);
     }
 }
 
 #[test]
 fn sponza_spheres_matches_the_cpu() {
-    asset_scene("sponza-spheres.toml");
+    asset_scene("sponza-spheres.toml", &[]);
 }
 #[test]
 fn sponza_armadillo_matches_the_cpu() {
-    asset_scene("sponza-armadillo.toml");
+    asset_scene("sponza-armadillo.toml", &[]);
 }
 #[test]
 fn dining_room_matches_the_cpu() {
-    asset_scene("dining-room.toml");
+    asset_scene("dining-room.toml", &[]);
 }
+/// The pavilion's refraction (and so the final image) is looser: its pool water is refracted
+/// onto surfaces where coplanar faces tie, and the tie flips with any perturbation. Measured at
+/// 96×54: refraction 0.024, final 0.029; the CPU's own trace of the CPU G-buffer with only the
+/// optical target replaced by the GPU's (IOR 1.33 stored as f16 = 1.3300781, DESIGN §2's
+/// Rgba16Float) differs from the CPU frame by the same 0.023, while the GPU trace of the CPU's
+/// G-buffer stays at 0.006: the difference is the format's IOR rounding, not the GPU stages.
 #[test]
 fn pavilion_matches_the_cpu() {
-    asset_scene("pavilion.toml");
+    asset_scene("pavilion.toml", &[("refraction", 0.035), ("final", 0.035)]);
 }
 #[test]
 fn tree_merge_matches_the_cpu() {
-    asset_scene("tree-merge.toml");
+    asset_scene("tree-merge.toml", &[]);
 }
