@@ -44,7 +44,8 @@ pub struct RenderArgs {
     /// rt-only (no raster, everything ray traced), raster (no ray tracing).
     #[arg(long, default_value = "hybrid", value_parser = parse_mode)]
     pub mode: Mode,
-    /// Rendering backend. `auto` picks a hardware GPU when one exists, else the CPU.
+    /// Rendering backend. `auto` picks a hardware GPU when one exists, else the CPU, and says
+    /// which it chose; `gpu` also accepts software adapters (lavapipe), slower than `cpu`.
     #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
     pub backend: BackendChoice,
     /// Write every buffer of the frame (PNG for viewing, EXR for float data) into this folder.
@@ -177,7 +178,8 @@ pub enum BackendChoice {
     Auto,
     /// The pure-Rust CPU backend.
     Cpu,
-    /// The wgpu backend (not built yet: asking for it is an error).
+    /// The wgpu backend on any adapter wgpu finds (Vulkan, Metal, DX12, GL; software adapters
+    /// such as Mesa's lavapipe included). No adapter is an error.
     Gpu,
 }
 

@@ -22,15 +22,15 @@ use std::path::Path;
 
 use hybrid_core::report::{FrameReport, StageTimings};
 use hybrid_core::{FrameSettings, Mode};
-use hybrid_cpu::frame::CpuRenderer;
 use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene};
 use serde::Serialize;
 use serde_json::json;
 
 use self::plot::{Chart, HLine, Series, write_chart};
 use crate::CliError;
-use crate::args::{BackendChoice, BenchArgs};
+use crate::args::BenchArgs;
 use crate::output::{ensure_dir, write_bytes};
+use crate::render::{AnyRenderer, Backend, RenderOptions, choose_backend};
 
 /// Warm-up frames rendered (and discarded) at the start of every pass.
 pub const WARMUP_FRAMES: usize = 2;
@@ -145,6 +145,8 @@ struct Bench {
     scene_name: String,
     size: (u32, u32),
     quiet: bool,
+    backend: Backend,
+    options: RenderOptions,
 }
 
 impl Bench {
@@ -157,17 +159,17 @@ impl Bench {
         }
         let (width, height) = self.size;
         let settings = FrameSettings { width, height, mode };
-        let mut renderer = CpuRenderer::new(scene).map_err(|e| CliError::bad_input(format!("{}: {e}", self.scene_name)))?;
+        let mut renderer = AnyRenderer::new(&self.backend, scene, &self.scene_name, self.options)?;
         if let Some(first) = shots.first() {
             for _ in 0..WARMUP_FRAMES {
-                let frame = renderer.render(&first.camera, settings, &mut |_| {});
+                let frame = renderer.render(&first.camera, settings, &mut |_| {})?;
                 renderer.recycle(frame);
             }
         }
         let mut records = Vec::with_capacity(shots.len());
         let mut images = BTreeMap::new();
         for (i, shot) in shots.iter().enumerate() {
-            let frame = renderer.render(&shot.camera, settings, &mut |_| {});
+            let frame = renderer.render(&shot.camera, settings, &mut |_| {})?;
             records.push(FrameRecord::new(set, i, shot, &frame.report));
             if keep(i) {
                 images.insert(i, frame.buffers.final_srgb.iter().flat_map(|p| [p[0], p[1], p[2]]).collect());
@@ -224,9 +226,6 @@ fn check_args(args: &BenchArgs) -> Result<(), CliError> {
     if args.sweep_budget && !args.modes.iter().any(|m| matches!(m, Mode::Hybrid | Mode::All)) {
         return Err(CliError::bad_input("--sweep-budget needs `hybrid` or `all` in --modes (for the all-selected cost)"));
     }
-    if args.backend == BackendChoice::Gpu {
-        return Err(CliError::bad_input("--backend gpu: this build has no GPU backend yet; use --backend cpu"));
-    }
     Ok(())
 }
 
@@ -259,7 +258,8 @@ fn plan(args: &BenchArgs, scene: &Scene, name: &str) -> Result<Plan, CliError> {
 /// The machine the numbers were taken on.
 #[derive(Debug, Serialize)]
 struct Machine {
-    backend: &'static str,
+    /// "cpu", or "gpu (adapter name, API)".
+    backend: String,
     cores: usize,
     threads: usize,
     cpu_model: Option<String>,
@@ -361,6 +361,11 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     let mut scene = load_scene(&args.scene)?;
     args.heuristic.apply(&mut scene.heuristic);
     let plan = plan(&args, &scene, &name)?;
+    let backend = choose_backend(args.backend, args.quiet)?;
+    let backend_name = match &backend {
+        Backend::Cpu => "cpu".to_string(),
+        Backend::Gpu(ctx) => format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend),
+    };
     // Everything is checked: now the output folder (created and probed before any rendering).
     ensure_dir(&args.out)?;
     if let Some(n) = args.threads {
@@ -368,7 +373,8 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     }
 
     let machine_start = load_average();
-    let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet };
+    let options = RenderOptions { clip_capsule: false, sphere_effects: true };
+    let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options };
     let mut modes: Vec<Mode> = Vec::new();
     for m in &args.modes {
         if !modes.contains(m) {
@@ -480,7 +486,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         path_passes.iter().map(|(m, p)| (m.name().to_string(), path_summary(&p.records.iter().collect::<Vec<_>>()))).collect();
     let threads = rayon::current_num_threads();
     let machine = Machine {
-        backend: "cpu",
+        backend: backend_name,
         cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         threads,
         cpu_model: cpu_model(),
@@ -660,9 +666,10 @@ fn markdown(
     let load = |l: Option<[f64; 3]>| l.map_or("?".into(), |l| format!("{:.2}", l[0]));
     let _ = writeln!(
         s,
-        "# hybrid bench — {name}, {}×{}, backend cpu, {} cores ({}), load average {} → {}{}\n",
+        "# hybrid bench — {name}, {}×{}, backend {}, {} cores ({}), load average {} → {}{}\n",
         args.size.0,
         args.size.1,
+        machine.backend,
         machine.cores,
         machine.cpu_model.as_deref().unwrap_or("unknown CPU"),
         load(machine.load_average_start),

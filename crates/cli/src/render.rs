@@ -1,10 +1,13 @@
 //! `hybrid render`: one frame of a scene to a PNG, with optional buffer dump and JSON report.
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use hybrid_core::{FrameSettings, Mode};
+use hybrid_core::{Frame, FrameSettings, Mode};
 use hybrid_cpu::frame::CpuRenderer;
-use hybrid_scene::{Scene, demo_scene, load_scene};
+use hybrid_gpu::frame::GpuRenderer;
+use hybrid_gpu::{AdapterChoice, GpuContext, GpuError};
+use hybrid_scene::{Camera, Scene, demo_scene, load_scene};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
@@ -32,18 +35,6 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
     }
     args.heuristic.check()?;
-    match args.backend {
-        BackendChoice::Cpu => {}
-        BackendChoice::Auto => {
-            if !args.quiet {
-                eprintln!("backend: cpu (auto: this build has no GPU backend)");
-            }
-        }
-        BackendChoice::Gpu => {
-            return Err(CliError::bad_input("--backend gpu: this build has no GPU backend yet; use --backend cpu"));
-        }
-    }
-
     let mut scene: Scene = match &args.scene {
         Some(path) => load_scene(path)?,
         None => demo_scene(),
@@ -66,13 +57,11 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     let start = Instant::now();
     let progress = Progress::new(args.quiet, start);
     progress.stage("prepare");
-    let mut renderer = CpuRenderer::new(&scene).map_err(|e| {
-        let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
-        CliError::bad_input(format!("{file}: {e}"))
-    })?;
-    renderer.clip_capsule_at_raster_depth = args.clip_capsule;
-    renderer.spheres_in_trace = !args.no_sphere_effects;
-    let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage));
+    let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
+    let backend = choose_backend(args.backend, args.quiet)?;
+    let options = RenderOptions { clip_capsule: args.clip_capsule, sphere_effects: !args.no_sphere_effects };
+    let mut renderer = AnyRenderer::new(&backend, &scene, &file, options)?;
+    let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage))?;
     progress.finish();
 
     write_png_rgba8(&args.output, width, height, &frame.buffers.final_srgb)?;
@@ -100,6 +89,101 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         );
     }
     Ok(())
+}
+
+/// Beyond-the-paper switches both backends take.
+#[derive(Debug, Clone, Copy)]
+pub struct RenderOptions {
+    /// `--clip-capsule`.
+    pub clip_capsule: bool,
+    /// Not `--no-sphere-effects`.
+    pub sphere_effects: bool,
+}
+
+/// A renderer on either backend, for commands that render frames (`render`, `bench`).
+pub enum AnyRenderer<'s> {
+    Cpu(Box<CpuRenderer<'s>>),
+    Gpu(Box<GpuRenderer<'s>>),
+}
+
+impl<'s> AnyRenderer<'s> {
+    /// Prepares `scene` (named `file` in errors) on `backend`.
+    pub fn new(backend: &Backend, scene: &'s Scene, file: &str, options: RenderOptions) -> Result<Self, CliError> {
+        Ok(match backend {
+            Backend::Cpu => {
+                let mut r = CpuRenderer::new(scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
+                r.clip_capsule_at_raster_depth = options.clip_capsule;
+                r.spheres_in_trace = options.sphere_effects;
+                AnyRenderer::Cpu(Box::new(r))
+            }
+            Backend::Gpu(ctx) => {
+                if options.clip_capsule {
+                    return Err(CliError::bad_input(
+                        "--clip-capsule: the GPU backend does not clip the capsule's rays yet; use --backend cpu",
+                    ));
+                }
+                let mut r = GpuRenderer::new(ctx.clone(), scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
+                r.spheres_in_trace = options.sphere_effects;
+                AnyRenderer::Gpu(Box::new(r))
+            }
+        })
+    }
+
+    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Result<Frame, CliError> {
+        match self {
+            AnyRenderer::Cpu(r) => Ok(r.render(camera, settings, on_stage)),
+            AnyRenderer::Gpu(r) => r.render(camera, settings, on_stage).map_err(|e| CliError::failure(e.to_string())),
+        }
+    }
+
+    /// Hands a finished frame back for reuse (CPU: its G-buffer memory).
+    pub fn recycle(&mut self, frame: Frame) {
+        if let AnyRenderer::Cpu(r) = self {
+            r.recycle(frame);
+        }
+    }
+}
+
+/// The backend a command runs on.
+pub enum Backend {
+    Cpu,
+    Gpu(Arc<GpuContext>),
+}
+
+/// `--backend`: `cpu`; `gpu` (any wgpu adapter, software ones such as lavapipe included; none is
+/// an error, exit 2); `auto` (a hardware GPU when one exists, else the CPU). Says which it chose
+/// unless `quiet`.
+pub fn choose_backend(choice: BackendChoice, quiet: bool) -> Result<Backend, CliError> {
+    let say = |what: String| {
+        if !quiet {
+            eprintln!("{what}");
+        }
+    };
+    match choice {
+        BackendChoice::Cpu => Ok(Backend::Cpu),
+        BackendChoice::Gpu => {
+            let ctx = GpuContext::new(AdapterChoice::Any).map_err(|e| CliError::bad_input(format!("--backend gpu: {e}")))?;
+            say(format!("backend: gpu ({}, {})", ctx.summary.name, ctx.summary.backend));
+            Ok(Backend::Gpu(Arc::new(ctx)))
+        }
+        BackendChoice::Auto => match GpuContext::new(AdapterChoice::HardwareOnly) {
+            Ok(ctx) => {
+                say(format!("backend: gpu (auto: hardware adapter {}, {})", ctx.summary.name, ctx.summary.backend));
+                Ok(Backend::Gpu(Arc::new(ctx)))
+            }
+            Err(e) => {
+                say(format!("backend: cpu (auto: {})", no_hardware_reason(&e)));
+                Ok(Backend::Cpu)
+            }
+        },
+    }
+}
+
+fn no_hardware_reason(e: &GpuError) -> String {
+    match e {
+        GpuError::NoAdapter => "no hardware GPU adapter".into(),
+        other => format!("no usable hardware GPU: {other}"),
+    }
 }
 
 /// A progress bar that only appears once a render has taken longer than a second.

@@ -166,7 +166,6 @@ fn bad_input_exits_with_2_and_writes_nothing() {
     assert_bad_input(&["bench", d, "--out", o, "--frames", "0"], &out, "--frames");
     assert_bad_input(&["bench", d, "--out", o, "--fps", "0"], &out, "--fps");
     assert_bad_input(&["bench", d, "--out", o, "--flip-every", "0"], &out, "--flip-every");
-    assert_bad_input(&["bench", d, "--out", o, "--backend", "gpu"], &out, "no GPU backend");
     assert_bad_input(&["bench", d, "--out", o, "--path-seconds", "999"], &out, "only");
     assert_bad_input(&["bench", d, "--out", o, "--path-seconds=-1"], &out, "--path-seconds");
     assert_bad_input(&["bench", d, "--out", o, "--modes", "rt-only", "--sweep-budget"], &out, "--sweep-budget");

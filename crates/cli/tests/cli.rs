@@ -24,12 +24,33 @@ fn files_in(dir: &Path) -> Vec<String> {
 
 #[test]
 fn renders_the_demo_scene_with_report_and_dump() {
+    render_demo_with_report_and_dump("cpu");
+}
+
+/// `--backend gpu` on whatever adapter wgpu finds (lavapipe in CI): the same outputs, file names
+/// and report keys as the CPU backend, plus `gpu_timings_ms` and the adapter.
+#[test]
+fn gpu_backend_renders_the_demo_scene_with_report_and_dump() {
+    let json = render_demo_with_report_and_dump("gpu");
+    for key in ["capsule", "raster", "lighting", "heuristic", "trace", "blend", "frame"] {
+        assert!(json["gpu_timings_ms"][key].is_number(), "gpu_timings_ms lacks `{key}`: {json}");
+    }
+    assert!(json["gpu_timings_ms"]["frame"].as_f64().unwrap() > 0.0, "{json}");
+    assert!(json["adapter"]["name"].as_str().is_some_and(|n| !n.is_empty()), "{json}");
+    assert!(json["adapter"]["backend"].is_string(), "{json}");
+}
+
+/// Renders the demo at 64×36 on `backend` with `--report` and `--dump`; checks the files and
+/// returns the report.
+fn render_demo_with_report_and_dump(backend: &str) -> serde_json::Value {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo.png");
     let report = dir.path().join("report.json");
     let dump = dir.path().join("dump");
     let o = hybrid(&[
         "render",
+        "--backend",
+        backend,
         "--size",
         "64x36",
         "--quiet",
@@ -53,7 +74,7 @@ fn renders_the_demo_scene_with_report_and_dump() {
     for key in ["primary", "shadow", "reflection", "refraction"] {
         assert!(json["rays"][key].is_number(), "rays lacks `{key}`");
     }
-    assert_eq!(json["backend"], "cpu");
+    assert_eq!(json["backend"], backend);
     assert_eq!(json["size"], serde_json::json!([64, 36]));
     let names = files_in(&dump);
     for b in [
@@ -85,6 +106,7 @@ fn renders_the_demo_scene_with_report_and_dump() {
     assert_eq!(image::open(dump.join("final.png")).unwrap().to_rgba8(), img.to_rgba8());
     // No temporary files are left behind.
     assert!(files_in(dir.path()).iter().all(|n| !n.contains("partial")), "{:?}", files_in(dir.path()));
+    json
 }
 
 /// Runs a render that must fail with exit code 2, a message containing every `needle`, and no
@@ -133,12 +155,37 @@ fn bad_flags_exit_2() {
 }
 
 #[test]
-fn time_without_camera_path_and_gpu_backend_are_clear_errors() {
+fn time_without_camera_path_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("nopath.toml");
     std::fs::write(&scene, "[[material]]\nname = \"m\"\n[[object]]\nprimitive = \"cube\"\nmaterial = \"m\"\n").unwrap();
     assert_bad_input(&[scene.to_str().unwrap(), "--time", "1.0"], &["camera_path"]);
-    assert_bad_input(&["--backend", "gpu"], &["GPU"]);
+}
+
+/// `--backend gpu` without a usable adapter (here: none matches HYBRID_ADAPTER) is a clear
+/// error with exit code 2 and no output file.
+#[test]
+fn gpu_backend_without_an_adapter_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_hybrid"))
+        .args(["render", "--quiet", "--backend", "gpu", "--size", "32x18", "-o", out.to_str().unwrap()])
+        .env("HYBRID_ADAPTER", "no-such-adapter-anywhere")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--backend gpu") && stderr(&o).contains("no-such-adapter-anywhere"), "{}", stderr(&o));
+    assert!(files_in(dir.path()).is_empty());
+}
+
+/// `--backend auto` (the default) says which backend it chose.
+#[test]
+fn auto_backend_says_which_it_chose() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = hybrid(&["render", "--size", "32x18", "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("backend: cpu") || stderr(&o).contains("backend: gpu"), "{}", stderr(&o));
 }
 
 #[test]

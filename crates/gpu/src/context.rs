@@ -64,8 +64,20 @@ impl GpuContext {
     /// Finds an adapter (best first; `HYBRID_ADAPTER=<substring>` picks one by name) and opens a
     /// device with the adapter's own limits (large scenes need big storage buffers).
     pub fn new(choice: AdapterChoice) -> Result<Self, GpuError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        // Vulkan, Metal and DX12 first; GL only where none of those has an adapter (a GL instance
+        // without a display logs EGL errors, and GL adapters lack features the passes use).
+        // WGPU_BACKEND (e.g. `gl`) overrides the choice.
+        let instance_for = |backends: wgpu::Backends| {
+            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+            desc.backends = backends;
+            wgpu::Instance::new(desc.with_env())
+        };
+        let mut instance = instance_for(wgpu::Backends::PRIMARY);
         let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        if adapters.is_empty() {
+            instance = instance_for(wgpu::Backends::GL);
+            adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        }
         adapters.sort_by_key(|a| rank(&a.get_info()));
         if let Ok(wanted) = std::env::var("HYBRID_ADAPTER") {
             let found = adapters.iter().map(|a| a.get_info().name).collect::<Vec<_>>().join(", ");

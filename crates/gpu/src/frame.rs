@@ -154,6 +154,9 @@ impl<'s> GpuRenderer<'s> {
             self.heuristic_passes.encode_count(&mut enc, targets, &mut self.timer);
         }
         self.ctx.queue.submit([enc.finish()]);
+        // The heuristic needs A: wait for stages 0–2's passes (their GPU times are measured by
+        // the timer; the host time below is the heuristic's own).
+        self.ctx.wait()?;
 
         // Stage 2 on the host: A per object → the shared heuristic → the mask pass.
         let heuristic_start = Instant::now();

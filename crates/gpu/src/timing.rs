@@ -125,25 +125,28 @@ impl StageTimer {
 /// Stage times from pass `k`'s start/end ticks (`ticks[2k]`, `ticks[2k+1]`).
 fn stage_times(passes: &[Stage], ticks: &[u64], period_ns: f32) -> StageTimings {
     let ms = |t: u64| t as f64 * period_ns as f64 * 1e-6;
-    let span = |stage: Option<Stage>| -> f64 {
+    // The passes of `stages` (all passes when empty), from the first start to the last end.
+    let span = |stages: &[Stage]| -> f64 {
         let mut lo = u64::MAX;
         let mut hi = 0u64;
         for (k, s) in passes.iter().enumerate() {
-            if stage.is_none_or(|st| st == *s) {
+            if stages.is_empty() || stages.contains(s) {
                 lo = lo.min(ticks[2 * k]);
                 hi = hi.max(ticks[2 * k + 1]);
             }
         }
         if hi > lo { ms(hi - lo) } else { 0.0 }
     };
+    // As the CPU backend reports it: `raster` is stage 1 whole (G-buffer + deferred lighting),
+    // `lighting` its deferred-lighting part.
     StageTimings {
-        capsule: span(Some(Stage::Capsule)),
-        raster: span(Some(Stage::Raster)),
-        lighting: span(Some(Stage::Lighting)),
-        heuristic: span(Some(Stage::Heuristic)),
-        trace: span(Some(Stage::Trace)),
-        blend: span(Some(Stage::Blend)),
-        frame: span(None),
+        capsule: span(&[Stage::Capsule]),
+        raster: span(&[Stage::Raster, Stage::Lighting]),
+        lighting: span(&[Stage::Lighting]),
+        heuristic: span(&[Stage::Heuristic]),
+        trace: span(&[Stage::Trace]),
+        blend: span(&[Stage::Blend]),
+        frame: span(&[]),
     }
 }
 
@@ -153,11 +156,11 @@ mod tests {
 
     #[test]
     fn stage_spans_from_first_start_to_last_end() {
-        // Capsule 0..10, raster 12..20, trace passes 25..30 and 31..45; period 1 ns = 1e-6 ms.
-        let passes = [Stage::Capsule, Stage::Raster, Stage::Trace, Stage::Trace];
-        let ticks = [0, 10, 12, 20, 25, 30, 31, 45];
+        // Capsule 0..10, raster 12..20, lighting 21..23, trace passes 25..30 and 31..45.
+        let passes = [Stage::Capsule, Stage::Raster, Stage::Lighting, Stage::Trace, Stage::Trace];
+        let ticks = [0, 10, 12, 20, 21, 23, 25, 30, 31, 45];
         let t = stage_times(&passes, &ticks, 1e6); // 1 tick = 1 ms
-        assert_eq!((t.capsule, t.raster, t.trace, t.blend), (10.0, 8.0, 20.0, 0.0));
+        assert_eq!((t.capsule, t.raster, t.lighting, t.trace, t.blend), (10.0, 11.0, 2.0, 20.0, 0.0));
         assert_eq!(t.frame, 45.0);
     }
 }
