@@ -19,7 +19,7 @@ use crate::readback::read_buffer;
 use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::spheres::{SPHERES_WGSL, SpheresGpu};
-use crate::targets::{DEPTH_FORMAT, FrameTargets, GBUFFER_COLOR_FORMATS, PACKED_FORMAT};
+use crate::targets::{FrameTargets, PACKED_FORMAT, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::{Stage, StageTimer};
 
 /// The capsule pass's WGSL (after common.wgsl and spheres.wgsl).
@@ -110,37 +110,7 @@ impl GpuCapsule {
             bind_group_layouts: &[Some(&scene.layout), Some(&unpack_layout)],
             immediate_size: 0,
         });
-        let color_targets: Vec<Option<wgpu::ColorTargetState>> = GBUFFER_COLOR_FORMATS
-            .iter()
-            .map(|&format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL }))
-            .collect();
-        let unpack_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("capsule.unpack"),
-            layout: Some(&unpack_pl),
-            vertex: wgpu::VertexState {
-                module: &unpack_module,
-                entry_point: Some("unpack_vs"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &unpack_module,
-                entry_point: Some("unpack_fs"),
-                compilation_options: Default::default(),
-                targets: &color_targets,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let unpack_pipeline = gbuffer_pipeline(device, "capsule.unpack", &unpack_pl, &unpack_module, "unpack_vs", "unpack_fs");
         let points = spheres.count as u64;
         Self {
             device: device.clone(),
@@ -211,37 +181,7 @@ impl GpuCapsule {
             layout: &self.unpack_layout,
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&targets.packed.view) }],
         });
-        let views = targets.gbuffer_color_views();
-        let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
-            .iter()
-            .enumerate()
-            .map(|(i, view)| {
-                // The object id target (the last) clears to NO_OBJECT (u32::MAX, exact in f64).
-                let clear = if i == views.len() - 1 {
-                    wgpu::Color { r: u32::MAX as f64, g: 0.0, b: 0.0, a: 0.0 }
-                } else {
-                    wgpu::Color::TRANSPARENT
-                };
-                Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
-                })
-            })
-            .collect();
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("capsule.unpack"),
-            color_attachments: &attachments,
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &targets.depth.view,
-                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: timer.render(Stage::Capsule),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = begin_gbuffer_pass(encoder, targets, true, "capsule.unpack", timer.render(Stage::Capsule));
         pass.set_pipeline(&self.unpack_pipeline);
         pass.set_bind_group(0, &scene.bind_group, &[]);
         pass.set_bind_group(1, &bind_group, &[]);

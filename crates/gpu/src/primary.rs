@@ -9,7 +9,7 @@ use crate::bvh::{BVH_WGSL, TriangleBvhGpu};
 use crate::context::GpuContext;
 use crate::scene::SceneGpu;
 use crate::shaders;
-use crate::targets::{DEPTH_FORMAT, FrameTargets, GBUFFER_COLOR_FORMATS};
+use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::{Stage, StageTimer};
 
 /// The pass's own WGSL (after common.wgsl and bvh.wgsl).
@@ -34,37 +34,7 @@ impl PrimaryPass {
             immediate_size: 0,
         });
         let module = shaders::module(device, "primary", &format!("{BVH_WGSL}\n{PRIMARY_WGSL}"));
-        let targets: Vec<Option<wgpu::ColorTargetState>> = GBUFFER_COLOR_FORMATS
-            .iter()
-            .map(|&format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL }))
-            .collect();
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("primary"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("primary_vs"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("primary_fs"),
-                compilation_options: Default::default(),
-                targets: &targets,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = gbuffer_pipeline(device, "primary", &pipeline_layout, &module, "primary_vs", "primary_fs");
         Self { pipeline, bind_group }
     }
 
@@ -79,35 +49,7 @@ impl PrimaryPass {
         clear: bool,
         timer: &mut StageTimer,
     ) {
-        let views = targets.gbuffer_color_views();
-        let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
-            .iter()
-            .enumerate()
-            .map(|(k, view)| {
-                let clear_value = if k == 7 { f64::from(u32::MAX) } else { 0.0 };
-                let load =
-                    if clear { wgpu::LoadOp::Clear(wgpu::Color { r: clear_value, g: 0.0, b: 0.0, a: 0.0 }) } else { wgpu::LoadOp::Load };
-                Some(wgpu::RenderPassColorAttachment {
-                    view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
-                })
-            })
-            .collect();
-        let depth_load = if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load };
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("primary"),
-            color_attachments: &attachments,
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &targets.depth.view,
-                depth_ops: Some(wgpu::Operations { load: depth_load, store: wgpu::StoreOp::Store }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: timer.render(Stage::Raster),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = begin_gbuffer_pass(encoder, targets, clear, "primary", timer.render(Stage::Raster));
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &scene.bind_group, &[]);
         pass.set_bind_group(1, &self.bind_group, &[]);

@@ -11,7 +11,7 @@
 use crate::context::GpuContext;
 use crate::scene::SceneGpu;
 use crate::shaders;
-use crate::targets::{DEPTH_FORMAT, FrameTargets, GBUFFER_COLOR_FORMATS};
+use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::{Stage, StageTimer};
 
 /// WGSL of the pass (common.wgsl is prepended).
@@ -31,42 +31,7 @@ impl RasterPass {
             bind_group_layouts: &[Some(&scene.layout)],
             immediate_size: 0,
         });
-        let targets: Vec<Option<wgpu::ColorTargetState>> = GBUFFER_COLOR_FORMATS
-            .iter()
-            .map(|&format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL }))
-            .collect();
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("raster"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                front_face: wgpu::FrontFace::Ccw,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &targets,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = gbuffer_pipeline(device, "raster", &layout, &module, "vs_main", "fs_main");
         Self { pipeline }
     }
 
@@ -82,35 +47,7 @@ impl RasterPass {
         clear: bool,
         timer: &mut StageTimer,
     ) {
-        let color_ops = |clear_value: wgpu::Color| wgpu::Operations {
-            load: if clear { wgpu::LoadOp::Clear(clear_value) } else { wgpu::LoadOp::Load },
-            store: wgpu::StoreOp::Store,
-        };
-        let views = targets.gbuffer_color_views();
-        let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
-            .iter()
-            .enumerate()
-            .map(|(i, view)| {
-                // Target 7 is the object id (R32Uint): cleared to NO_OBJECT = u32::MAX (exact in f64).
-                let value = if i == 7 { wgpu::Color { r: f64::from(u32::MAX), g: 0.0, b: 0.0, a: 0.0 } } else { wgpu::Color::TRANSPARENT };
-                Some(wgpu::RenderPassColorAttachment { view, depth_slice: None, resolve_target: None, ops: color_ops(value) })
-            })
-            .collect();
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("raster"),
-            color_attachments: &attachments,
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &targets.depth.view,
-                depth_ops: Some(wgpu::Operations {
-                    load: if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load },
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: timer.render(Stage::Raster),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = begin_gbuffer_pass(encoder, targets, clear, "raster", timer.render(Stage::Raster));
         if scene.triangle_count > 0 {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &scene.bind_group, &[]);

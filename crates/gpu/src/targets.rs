@@ -120,3 +120,84 @@ impl FrameTargets {
         ]
     }
 }
+
+/// A render pipeline that writes the whole G-buffer: the 8 colour targets in
+/// [`GBUFFER_COLOR_FORMATS`] order and reversed-Z depth (compare Greater, write on), no culling,
+/// no vertex buffers. The raster, primary-ray and capsule-unpack passes all use it.
+pub fn gbuffer_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    vertex_entry: &str,
+    fragment_entry: &str,
+) -> wgpu::RenderPipeline {
+    let targets: Vec<Option<wgpu::ColorTargetState>> = GBUFFER_COLOR_FORMATS
+        .iter()
+        .map(|&format| Some(wgpu::ColorTargetState { format, blend: None, write_mask: wgpu::ColorWrites::ALL }))
+        .collect();
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState { module, entry_point: Some(vertex_entry), compilation_options: Default::default(), buffers: &[] },
+        primitive: wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleList, cull_mode: None, ..Default::default() },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(fragment_entry),
+            compilation_options: Default::default(),
+            targets: &targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// Begins a render pass over the G-buffer's 8 colour targets and depth. `clear = true` clears
+/// them first (object id to `NO_OBJECT` = u32::MAX, depth to 0 = far, the rest to 0);
+/// `clear = false` loads what an earlier pass wrote (depth-testing against it).
+pub fn begin_gbuffer_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    targets: &FrameTargets,
+    clear: bool,
+    label: &str,
+    timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+) -> wgpu::RenderPass<'e> {
+    let views = targets.gbuffer_color_views();
+    let last = views.len() - 1;
+    let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = views
+        .iter()
+        .enumerate()
+        .map(|(i, view)| {
+            // The object id target (the last) clears to NO_OBJECT (u32::MAX, exact in f64).
+            let value = if i == last { wgpu::Color { r: f64::from(u32::MAX), g: 0.0, b: 0.0, a: 0.0 } } else { wgpu::Color::TRANSPARENT };
+            let load = if clear { wgpu::LoadOp::Clear(value) } else { wgpu::LoadOp::Load };
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load, store: wgpu::StoreOp::Store },
+            })
+        })
+        .collect();
+    let depth_load = if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load };
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &attachments,
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: &targets.depth.view,
+            depth_ops: Some(wgpu::Operations { load: depth_load, store: wgpu::StoreOp::Store }),
+            stencil_ops: None,
+        }),
+        timestamp_writes,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}

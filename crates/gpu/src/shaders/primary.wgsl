@@ -5,21 +5,7 @@
 
 @vertex
 fn primary_vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    let x = f32(i32(i & 1u) * 4 - 1);
-    let y = f32(i32(i >> 1u) * 4 - 1);
-    return vec4<f32>(x, y, 0.0, 1.0);
-}
-
-struct GBufferOut {
-    @location(0) position: vec4<f32>,
-    @location(1) normal: vec4<f32>,
-    @location(2) emission: vec4<f32>,
-    @location(3) ambient: vec4<f32>,
-    @location(4) diffuse: vec4<f32>,
-    @location(5) specular: vec4<f32>,
-    @location(6) optical: vec4<f32>,
-    @location(7) object_id: u32,
-    @builtin(frag_depth) depth: f32,
+    return fullscreen_vertex(i);
 }
 
 fn project(m: mat4x4<f32>, p: vec3<f32>) -> vec3<f32> {
@@ -54,7 +40,7 @@ fn uv_footprint(tri: u32, dir: vec3<f32>, world: f32) -> f32 {
 }
 
 @fragment
-fn primary_fs(@builtin(position) frag: vec4<f32>) -> GBufferOut {
+fn primary_fs(@builtin(position) frag: vec4<f32>) -> GBufferDepthOut {
     // The ray through the pixel centre from the near plane to the far plane (reversed-Z: NDC
     // z = 1 near, 0 far), from the inverse view-projection as the CPU's `PrimaryRays`.
     let nx = frag.x * frame.size.z * 2.0 - 1.0;
@@ -77,15 +63,5 @@ fn primary_fs(@builtin(position) frag: vec4<f32>) -> GBufferOut {
         world = world * distance(point, frame.camera_position.xyz);
     }
     let s = triangle_surface_at(hit.tri, hit.bary, uv_footprint(hit.tri, dir, world));
-    var out: GBufferOut;
-    out.position = vec4<f32>(s.position, 1.0);
-    out.normal = vec4<f32>(s.normal, 0.0);
-    out.emission = vec4<f32>(s.emission, 1.0);
-    out.ambient = vec4<f32>(s.ambient, 1.0);
-    out.diffuse = vec4<f32>(s.diffuse, s.opacity);
-    out.specular = vec4<f32>(s.specular, s.shininess);
-    out.optical = vec4<f32>(s.reflectivity, s.ior, s.opacity, 1.0);
-    out.object_id = meshes[triangles[hit.tri].mesh].object;
-    out.depth = clamp(project(frame.view_proj, s.position).z, 0.0, 1.0);
-    return out;
+    return gbuffer_depth_out(s, meshes[triangles[hit.tri].mesh].object, clamp(project(frame.view_proj, s.position).z, 0.0, 1.0));
 }

@@ -49,20 +49,6 @@ fn vs_main(@builtin(vertex_index) vi: u32) -> VsOut {
     return out;
 }
 
-struct GBufferOut {
-    @location(0) position: vec4<f32>,
-    @location(1) normal: vec4<f32>,
-    @location(2) emission: vec4<f32>,
-    @location(3) ambient: vec4<f32>,
-    /// rgb diffuse, a opacity.
-    @location(4) diffuse: vec4<f32>,
-    /// rgb specular, a shininess.
-    @location(5) specular: vec4<f32>,
-    /// reflectivity, IOR, opacity.
-    @location(6) optical: vec4<f32>,
-    @location(7) object_id: u32,
-}
-
 @fragment
 fn fs_main(in: VsOut) -> GBufferOut {
     // UV change per pixel (the CPU: the UV planes one pixel right and one down), in uniform
@@ -83,14 +69,5 @@ fn fs_main(in: VsOut) -> GBufferOut {
     p.color = in.color;
     p.uv_footprint = footprint;
     let s = evaluate_surface(p);
-    var out: GBufferOut;
-    out.position = vec4<f32>(s.position, 1.0);
-    out.normal = vec4<f32>(s.normal, 0.0);
-    out.emission = vec4<f32>(s.emission, 1.0);
-    out.ambient = vec4<f32>(s.ambient, 1.0);
-    out.diffuse = vec4<f32>(s.diffuse, s.opacity);
-    out.specular = vec4<f32>(s.specular, s.shininess);
-    out.optical = vec4<f32>(s.reflectivity, s.ior, s.opacity, 1.0);
-    out.object_id = meshes[mesh].object;
-    return out;
+    return gbuffer_out(s, meshes[mesh].object);
 }

@@ -8,25 +8,11 @@
 
 @vertex
 fn unpack_vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
-    // One triangle covering the screen: (-1,-1), (3,-1), (-1,3).
-    let p = vec2<f32>(f32((i << 1u) & 2u), f32(i & 2u)) * 2.0 - vec2<f32>(1.0);
-    return vec4<f32>(p, 0.0, 1.0);
-}
-
-struct GBufferOut {
-    @location(0) position: vec4<f32>,
-    @location(1) normal: vec4<f32>,
-    @location(2) emission: vec4<f32>,
-    @location(3) ambient: vec4<f32>,
-    @location(4) diffuse: vec4<f32>,
-    @location(5) specular: vec4<f32>,
-    @location(6) optical: vec4<f32>,
-    @location(7) object_id: u32,
-    @builtin(frag_depth) depth: f32,
+    return fullscreen_vertex(i);
 }
 
 @fragment
-fn unpack_fs(@builtin(position) frag: vec4<f32>) -> GBufferOut {
+fn unpack_fs(@builtin(position) frag: vec4<f32>) -> GBufferDepthOut {
     let px = vec2<u32>(frag.xy);
     let t = textureLoad(packed_in, px, 0);
     let a = (t.x & 0xffffu) | ((t.y & 0xffffu) << 16u);
@@ -49,15 +35,12 @@ fn unpack_fs(@builtin(position) frag: vec4<f32>) -> GBufferOut {
         normal = normalize_or(frame.raygen_eye.xyz - p, back);
     }
 
-    var out: GBufferOut;
-    out.position = vec4<f32>(p, 1.0);
-    out.normal = vec4<f32>(normal, 0.0);
-    out.emission = vec4<f32>(color, 1.0);
-    out.ambient = vec4<f32>(0.0);
-    out.diffuse = vec4<f32>(0.0, 0.0, 0.0, 1.0);  // no reflectance, opacity 1
-    out.specular = vec4<f32>(0.0);                 // no specular, shininess 0
-    out.optical = vec4<f32>(0.0, 1.0, 1.0, 0.0);   // reflectivity 0, IOR 1, opacity 1
-    out.object_id = RT_SCENE_OBJECT;
-    out.depth = depth;
-    return out;
+    // The RT surface: emission = its colour, no other reflectance, opaque, IOR 1.
+    var s: Surface;
+    s.position = p;
+    s.normal = normal;
+    s.emission = color;
+    s.opacity = 1.0;
+    s.ior = 1.0;
+    return gbuffer_depth_out(s, RT_SCENE_OBJECT, depth);
 }
