@@ -13,24 +13,17 @@ use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, RayGen, render_sync
 use hybrid_cpu::prepare::PreparedScene;
 use hybrid_cpu::raster::merge_rt_layer;
 use hybrid_cpu::spheres::SphereBvh;
+use hybrid_gpu::GpuContext;
 use hybrid_gpu::capsule::GpuCapsule;
 use hybrid_gpu::readback::{read_gbuffer, read_packed};
 use hybrid_gpu::scene::SceneGpu;
 use hybrid_gpu::spheres::SpheresGpu;
 use hybrid_gpu::targets::FrameTargets;
 use hybrid_gpu::timing::StageTimer;
-use hybrid_gpu::{AdapterChoice, GpuContext};
 use hybrid_scene::{Attenuation, Camera, DirectionalLight, PointCloud, PointColoring, PointLight, Projection, Scene};
 
-fn context() -> GpuContext {
-    match GpuContext::new(AdapterChoice::Any) {
-        Ok(ctx) => {
-            eprintln!("adapter: {} ({})", ctx.summary.name, ctx.summary.backend);
-            ctx
-        }
-        Err(e) => panic!("these tests need a GPU adapter (lavapipe is enough): {e}"),
-    }
-}
+mod support;
+use support::context;
 
 /// What the GPU made of one frame.
 struct GpuFrame {

@@ -8,14 +8,14 @@ use std::sync::Arc;
 use hybrid_core::{Frame, FrameSettings, Mode};
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
-use hybrid_gpu::{AdapterChoice, GpuContext};
+use hybrid_gpu::GpuContext;
 use hybrid_scene::{Scene, demo_scene, load_scene};
 
 mod support;
 use support::{BufferComparison, compare_frames};
 
 fn context() -> Arc<GpuContext> {
-    Arc::new(GpuContext::new(AdapterChoice::Any).unwrap_or_else(|e| panic!("the GPU tests need a wgpu adapter: {e}")))
+    Arc::new(support::context())
 }
 
 fn render_both(ctx: &Arc<GpuContext>, scene: &Scene, mode: Mode, w: u32, h: u32) -> (Frame, Frame) {

@@ -7,21 +7,17 @@ use glam::Vec3;
 use hybrid_core::blend::{blend_pixel, encode_srgb};
 use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RT_SCENE_OBJECT};
 use hybrid_cpu::frame::CpuRenderer;
+use hybrid_gpu::GpuContext;
 use hybrid_gpu::blend::BlendPass;
 use hybrid_gpu::heuristic::{HeuristicPasses, MaskSelection};
 use hybrid_gpu::readback;
 use hybrid_gpu::targets::FrameTargets;
 use hybrid_gpu::timing::StageTimer;
-use hybrid_gpu::{AdapterChoice, GpuContext};
 use hybrid_heuristic::{count_visible_pixels, write_mask};
 use hybrid_scene::demo_scene;
 
-fn context() -> GpuContext {
-    match GpuContext::new(AdapterChoice::Any) {
-        Ok(ctx) => ctx,
-        Err(e) => panic!("these tests need a wgpu adapter (lavapipe will do): {e}"),
-    }
-}
+mod support;
+use support::{context, mean_flip, rgb8};
 
 /// Deterministic pseudo-random numbers (LCG).
 struct Lcg(u32);
@@ -225,15 +221,8 @@ fn hand_computed_blend_pixels() {
     assert_eq!(gpu, expected.to_vec());
 }
 
-fn rgb8(image: &[[u8; 4]]) -> Vec<u8> {
-    image.iter().flat_map(|p| [p[0], p[1], p[2]]).collect()
-}
-
-fn mean_flip(w: u32, h: u32, reference: &[[u8; 4]], test: &[[u8; 4]]) -> f32 {
-    let a = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(reference));
-    let b = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(test));
-    let err = nv_flip::flip(a, b, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    nv_flip::FlipPool::from_image(&err).mean()
+fn mean_flip_rgba(w: u32, h: u32, reference: &[[u8; 4]], test: &[[u8; 4]]) -> f32 {
+    mean_flip(w, h, &rgb8(reference), &rgb8(test))
 }
 
 /// (max per-channel difference, differing bytes)
@@ -262,7 +251,7 @@ fn blend_matches_the_cpu_frame_on_the_demo_scene() {
 
     // Against the CPU's own final image (its inputs are f32; the GPU's went through Rgba16Float).
     let (max, bytes) = byte_diff(&gpu, &b.final_srgb);
-    let flip = mean_flip(w, h, &b.final_srgb, &gpu);
+    let flip = mean_flip_rgba(w, h, &b.final_srgb, &gpu);
     eprintln!("GPU blend vs CPU final_srgb: max channel diff {max}, {bytes} differing bytes of {}, mean FLIP {flip:.5}", gpu.len() * 4);
     assert!(max <= 2, "max channel difference {max}");
     assert!(flip <= 0.005, "mean FLIP {flip}");

@@ -9,24 +9,17 @@ use glam::Vec3;
 use hybrid_core::blend::encode_srgb;
 use hybrid_core::{FrameBuffers, GBuffer, NO_OBJECT};
 use hybrid_cpu::prepare::PreparedScene;
+use hybrid_gpu::GpuContext;
 use hybrid_gpu::lighting::LightingPass;
 use hybrid_gpu::raster::RasterPass;
 use hybrid_gpu::readback::{read_frame_buffers, read_gbuffer};
 use hybrid_gpu::scene::SceneGpu;
 use hybrid_gpu::targets::FrameTargets;
 use hybrid_gpu::timing::StageTimer;
-use hybrid_gpu::{AdapterChoice, GpuContext};
 use hybrid_scene::Scene;
 
-fn context() -> GpuContext {
-    match GpuContext::new(AdapterChoice::Any) {
-        Ok(ctx) => {
-            eprintln!("adapter: {} ({}, {})", ctx.summary.name, ctx.summary.backend, ctx.summary.device_type);
-            ctx
-        }
-        Err(e) => panic!("these tests need a GPU adapter (lavapipe is enough): {e}"),
-    }
-}
+mod support;
+use support::{context, mean_flip_linear};
 
 /// Rasterises and lights `scene` on the GPU (`clear = true`: no RT layer).
 fn render_gpu(ctx: &GpuContext, scene: &Scene, w: u32, h: u32) -> (GBuffer, FrameBuffers) {
@@ -56,15 +49,6 @@ fn render_cpu(scene: &Scene, w: u32, h: u32) -> (GBuffer, Vec<Vec3>) {
     let g = hybrid_cpu::raster::rasterize(&prepared, &scene.camera, w, h, None);
     let lit = hybrid_cpu::lighting::deferred_lighting(&g, scene, &scene.camera);
     (g, lit)
-}
-
-/// Mean FLIP between two linear images, each clamped to [0, 1] and sRGB-encoded (LDR, no tone map).
-fn mean_flip(w: u32, h: u32, reference: &[Vec3], test: &[Vec3]) -> f32 {
-    let rgb8 = |img: &[Vec3]| -> Vec<u8> { img.iter().flat_map(|&c| encode_srgb(c)[..3].to_vec()).collect() };
-    let a = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(reference));
-    let b = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(test));
-    let err = nv_flip::flip(a, b, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    nv_flip::FlipPool::from_image(&err).mean()
 }
 
 struct Comparison {
@@ -115,10 +99,10 @@ fn compare(name: &str, scene: &Scene, w: u32, h: u32) -> Comparison {
         id_mismatches,
         covered,
         max_depth_diff,
-        flip_lighting: mean_flip(w, h, &clit, &gb.lighting),
-        flip_diffuse: mean_flip(w, h, &diffuse(&cg), &diffuse(&gg)),
-        flip_normal: mean_flip(w, h, &normal(&cg), &normal(&gg)),
-        flip_lighting_same_gbuffer: mean_flip(w, h, &same, &gb.lighting),
+        flip_lighting: mean_flip_linear(w, h, &clit, &gb.lighting),
+        flip_diffuse: mean_flip_linear(w, h, &diffuse(&cg), &diffuse(&gg)),
+        flip_normal: mean_flip_linear(w, h, &normal(&cg), &normal(&gg)),
+        flip_lighting_same_gbuffer: mean_flip_linear(w, h, &same, &gb.lighting),
         max_code_diff_same_gbuffer: same
             .iter()
             .zip(&gb.lighting)

@@ -3,13 +3,13 @@
 //! tests compare the trace stage alone. They fail (not skip) without an adapter.
 
 use glam::{Vec2, Vec3};
-use hybrid_core::blend::encode_srgb;
 use hybrid_core::report::RayCounts;
 use hybrid_core::{FrameBuffers, GBuffer, NO_OBJECT, Surface};
 use hybrid_cpu::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::capsule::PointCloudCapsule;
 use hybrid_cpu::trace::{TraceOutput, rt_only_gbuffer, trace, trace_with_spheres};
+use hybrid_gpu::GpuContext;
 use hybrid_gpu::primary::PrimaryPass;
 use hybrid_gpu::readback::{read_frame_buffers, read_gbuffer, write_gbuffer};
 use hybrid_gpu::scene::SceneGpu;
@@ -17,17 +17,15 @@ use hybrid_gpu::spheres::SpheresGpu;
 use hybrid_gpu::targets::FrameTargets;
 use hybrid_gpu::timing::StageTimer;
 use hybrid_gpu::trace::TracePasses;
-use hybrid_gpu::{AdapterChoice, GpuContext};
 use hybrid_scene::{
     Camera, ColorSpace, DirectionalLight, Environment, Lights, Material, Mesh, PointCloud, PointColoring, Projection, Scene, Skybox,
     Texture,
 };
 
-const SKY: Vec3 = Vec3::new(0.3, 0.6, 0.9);
+mod support;
+use support::{context, mean_flip_linear};
 
-fn context() -> GpuContext {
-    GpuContext::new(AdapterChoice::Any).unwrap_or_else(|e| panic!("these tests need a GPU adapter (lavapipe will do): {e}"))
-}
+const SKY: Vec3 = Vec3::new(0.3, 0.6, 0.9);
 
 /// The GPU trace stage over `g`: (shadow, reflection, refraction buffers, ray counts). The
 /// scene's point clouds are traced as spheres.
@@ -53,17 +51,6 @@ fn cpu_trace(scene: &Scene, g: &GBuffer) -> TraceOutput {
     trace(&prepared, &bvh, g, &scene.camera)
 }
 
-fn rgb8(c: &[Vec3]) -> Vec<u8> {
-    c.iter().flat_map(|v| encode_srgb(v.clamp(Vec3::ZERO, Vec3::ONE))[..3].to_vec()).collect()
-}
-
-fn mean_flip(w: u32, h: u32, reference: &[Vec3], test: &[Vec3]) -> f32 {
-    let a = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(reference));
-    let b = nv_flip::FlipImageRgb8::with_data(w, h, &rgb8(test));
-    let err = nv_flip::flip(a, b, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
-    nv_flip::FlipPool::from_image(&err).mean()
-}
-
 fn max_diff(a: &[Vec3], b: &[Vec3]) -> f32 {
     a.iter().zip(b).map(|(x, y)| (*x - *y).abs().max_element()).fold(0.0, f32::max)
 }
@@ -76,7 +63,7 @@ fn compare(name: &str, w: u32, h: u32, cpu: &TraceOutput, gpu: &FrameBuffers, gp
         ("reflection", &cpu.reflection, &gpu.reflection),
         ("refraction", &cpu.refraction, &gpu.refraction),
     ] {
-        let flip = mean_flip(w, h, c, g);
+        let flip = mean_flip_linear(w, h, c, g);
         let far = c.iter().zip(g.iter()).filter(|(x, y)| (**x - **y).abs().max_element() > 0.05).count();
         eprintln!("{name} {buffer}: mean FLIP {flip:.5}, max |diff| {:.4}, {far} of {} pixels differ by > 0.05", max_diff(c, g), c.len());
         worst = worst.max(flip);

@@ -5,11 +5,29 @@
 use std::fmt;
 
 use glam::Vec3;
+use hybrid_core::blend::encode_srgb;
 use hybrid_core::{Frame, GBuffer, NO_OBJECT};
+use hybrid_gpu::{AdapterChoice, GpuContext};
 
-/// Linear RGB → 8-bit sRGB (clamped), row-major.
+/// The adapter the GPU tests run on (lavapipe in CI). No adapter fails the test, loudly.
+pub fn context() -> GpuContext {
+    match GpuContext::new(AdapterChoice::Any) {
+        Ok(ctx) => {
+            eprintln!("adapter: {} ({}, {})", ctx.summary.name, ctx.summary.backend, ctx.summary.device_type);
+            ctx
+        }
+        Err(e) => panic!("these tests need a GPU adapter (lavapipe is enough): {e}"),
+    }
+}
+
+/// Linear RGB → 8-bit sRGB exactly as the final image is encoded (clamped), row-major.
 pub fn srgb8(values: &[Vec3]) -> Vec<u8> {
-    values.iter().flat_map(|c| c.to_array().map(|x| (hybrid_scene::texture::linear_to_srgb(x) * 255.0 + 0.5) as u8)).collect()
+    values.iter().flat_map(|&c| encode_srgb(c)[..3].to_vec()).collect()
+}
+
+/// RGBA8 pixels → RGB bytes.
+pub fn rgb8(image: &[[u8; 4]]) -> Vec<u8> {
+    image.iter().flat_map(|p| [p[0], p[1], p[2]]).collect()
 }
 
 /// Values in [-1, 1] (normals) → 8-bit, 0.5 = 0.
@@ -74,8 +92,7 @@ pub fn compare_frames(c: &Frame, g: &Frame) -> BufferComparison {
     flip.push(("shadow", mean_flip_linear(w, h, &b.0.shadow, &b.1.shadow)));
     flip.push(("reflection", mean_flip_linear(w, h, &b.0.reflection, &b.1.reflection)));
     flip.push(("refraction", mean_flip_linear(w, h, &b.0.refraction, &b.1.refraction)));
-    let rgb = |v: &[[u8; 4]]| v.iter().flat_map(|p| [p[0], p[1], p[2]]).collect::<Vec<u8>>();
-    flip.push(("final", mean_flip(w, h, &rgb(&b.0.final_srgb), &rgb(&b.1.final_srgb))));
+    flip.push(("final", mean_flip(w, h, &rgb8(&b.0.final_srgb), &rgb8(&b.1.final_srgb))));
     let (cg, gg) = (&c.gbuffer, &g.gbuffer);
     let object_id_mismatches = cg.object_id.iter().zip(&gg.object_id).filter(|(a, b)| a != b).count();
     let mask_mismatches = cg.mask.iter().zip(&gg.mask).filter(|(a, b)| (**a > 0.0) != (**b > 0.0)).count();
