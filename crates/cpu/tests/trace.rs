@@ -1,12 +1,13 @@
 //! Trace stage (paper 1 listings 8a–d) on tiny hand-built scenes with hand-computed answers.
 
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use hybrid_core::blend::blend_pixel;
 use hybrid_core::shading::Light;
 use hybrid_core::{GBuffer, Surface};
 use hybrid_cpu::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::trace::{RayCounts, TraceOutput, primary_ray_count, rt_only_gbuffer, trace};
+use hybrid_scene::primitives::{cuboid, quad};
 use hybrid_scene::{Camera, ColorSpace, DirectionalLight, Environment, Lights, Material, Mesh, Projection, Scene, Skybox, Texture};
 
 const SKY: Vec3 = Vec3::new(0.3, 0.6, 0.9);
@@ -20,43 +21,6 @@ fn scene(materials: Vec<Material>, meshes: Vec<Mesh>, lights: Lights, camera: Ca
         scene.push_mesh_object(format!("object {i}"), m);
     }
     scene
-}
-
-/// A quad centred at `c` spanned by half-edges `u`, `v`; normal `u × v`.
-fn quad(c: Vec3, u: Vec3, v: Vec3, material: usize) -> Mesh {
-    let n = u.cross(v).normalize();
-    Mesh {
-        positions: vec![c - u - v, c + u - v, c + u + v, c - u + v],
-        normals: vec![n; 4],
-        uvs: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
-        indices: vec![[0, 1, 2], [0, 2, 3]],
-        material,
-        ..Default::default()
-    }
-}
-
-/// An axis-aligned box with outward normals.
-fn cuboid(min: Vec3, max: Vec3, material: usize) -> Mesh {
-    let c = (min + max) * 0.5;
-    let h = (max - min) * 0.5;
-    let faces = [
-        (Vec3::X, Vec3::Y, Vec3::Z),
-        (-Vec3::X, Vec3::Z, Vec3::Y),
-        (Vec3::Y, Vec3::Z, Vec3::X),
-        (-Vec3::Y, Vec3::X, Vec3::Z),
-        (Vec3::Z, Vec3::X, Vec3::Y),
-        (-Vec3::Z, Vec3::Y, Vec3::X),
-    ];
-    let mut mesh = Mesh { material, ..Default::default() };
-    for (n, a, b) in faces {
-        let q = quad(c + n * h, a * h, b * h, material);
-        let base = mesh.positions.len() as u32;
-        mesh.positions.extend(q.positions);
-        mesh.normals.extend(q.normals);
-        mesh.uvs.extend(q.uvs);
-        mesh.indices.extend(q.indices.iter().map(|t| t.map(|i| i + base)));
-    }
-    mesh
 }
 
 fn camera(position: Vec3, target: Vec3) -> Camera {

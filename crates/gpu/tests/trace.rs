@@ -17,6 +17,7 @@ use hybrid_gpu::spheres::SpheresGpu;
 use hybrid_gpu::targets::FrameTargets;
 use hybrid_gpu::timing::StageTimer;
 use hybrid_gpu::trace::TracePasses;
+use hybrid_scene::primitives::{cuboid, quad};
 use hybrid_scene::{
     Camera, ColorSpace, DirectionalLight, Environment, Lights, Material, Mesh, PointCloud, PointColoring, Projection, Scene, Skybox,
     Texture,
@@ -119,41 +120,6 @@ fn scene(materials: Vec<Material>, meshes: Vec<Mesh>, lights: Lights, camera: Ca
         scene.push_mesh_object(format!("object {i}"), m);
     }
     scene
-}
-
-fn quad(c: Vec3, u: Vec3, v: Vec3, material: usize) -> Mesh {
-    let n = u.cross(v).normalize();
-    Mesh {
-        positions: vec![c - u - v, c + u - v, c + u + v, c - u + v],
-        normals: vec![n; 4],
-        uvs: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
-        indices: vec![[0, 1, 2], [0, 2, 3]],
-        material,
-        ..Default::default()
-    }
-}
-
-fn cuboid(min: Vec3, max: Vec3, material: usize) -> Mesh {
-    let c = (min + max) * 0.5;
-    let h = (max - min) * 0.5;
-    let faces = [
-        (Vec3::X, Vec3::Y, Vec3::Z),
-        (-Vec3::X, Vec3::Z, Vec3::Y),
-        (Vec3::Y, Vec3::Z, Vec3::X),
-        (-Vec3::Y, Vec3::X, Vec3::Z),
-        (Vec3::Z, Vec3::X, Vec3::Y),
-        (-Vec3::Z, Vec3::Y, Vec3::X),
-    ];
-    let mut mesh = Mesh { material, ..Default::default() };
-    for (n, a, b) in faces {
-        let q = quad(c + n * h, a * h, b * h, material);
-        let base = mesh.positions.len() as u32;
-        mesh.positions.extend(q.positions);
-        mesh.normals.extend(q.normals);
-        mesh.uvs.extend(q.uvs);
-        mesh.indices.extend(q.indices.iter().map(|t| t.map(|i| i + base)));
-    }
-    mesh
 }
 
 fn camera(position: Vec3, target: Vec3) -> Camera {

@@ -60,6 +60,46 @@ pub fn cube() -> Mesh {
     m
 }
 
+/// A quad centred at `c` spanned by the half-edges `u` and `v`: corners `c ± u ± v`, normal
+/// `u × v` (normalised), UVs 0..1 from corner `c − u − v`, assigned `material`. For scenes built
+/// in code (tests, benchmarks).
+pub fn quad(c: Vec3, u: Vec3, v: Vec3, material: usize) -> Mesh {
+    let n = u.cross(v).normalize();
+    Mesh {
+        positions: vec![c - u - v, c + u - v, c + u + v, c - u + v],
+        normals: vec![n; 4],
+        uvs: vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        material,
+        ..Default::default()
+    }
+}
+
+/// The axis-aligned box from `min` to `max`: six [`quad`]s with outward normals, assigned
+/// `material`.
+pub fn cuboid(min: Vec3, max: Vec3, material: usize) -> Mesh {
+    let c = (min + max) * 0.5;
+    let h = (max - min) * 0.5;
+    let faces = [
+        (Vec3::X, Vec3::Y, Vec3::Z),
+        (-Vec3::X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::Z, Vec3::X),
+        (-Vec3::Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (-Vec3::Z, Vec3::Y, Vec3::X),
+    ];
+    let mut mesh = Mesh { material, ..Default::default() };
+    for (n, a, b) in faces {
+        let q = quad(c + n * h, a * h, b * h, material);
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend(q.positions);
+        mesh.normals.extend(q.normals);
+        mesh.uvs.extend(q.uvs);
+        mesh.indices.extend(q.indices.iter().map(|t| t.map(|i| i + base)));
+    }
+    mesh
+}
+
 /// A UV sphere of radius 0.5 centred on the origin. `slices` (≥ 3) segments around the Y axis,
 /// `stacks` (≥ 2) from the +Y pole to the −Y pole; values are clamped into
 /// [`MIN_SPHERE_SLICES`]/[`MIN_SPHERE_STACKS`]..=[`MAX_SPHERE_SEGMENTS`] (scene files reject
@@ -118,6 +158,25 @@ mod tests {
     use std::collections::HashMap;
 
     use super::*;
+
+    #[test]
+    fn cuboid_faces_point_outwards_and_cover_the_box() {
+        let (min, max) = (Vec3::new(-1.0, 0.0, 2.0), Vec3::new(3.0, 1.0, 2.5));
+        let m = cuboid(min, max, 7);
+        assert_eq!((m.positions.len(), m.indices.len(), m.material), (24, 12, 7));
+        let centre = (min + max) * 0.5;
+        for t in &m.indices {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            let n = (b - a).cross(c - a);
+            assert!(n.dot((a + b + c) / 3.0 - centre) > 0.0, "triangle {t:?} winds inwards");
+            assert!(n.normalize().dot(m.normals[t[0] as usize]) > 0.999, "normal disagrees with winding");
+        }
+        assert!(m.positions.iter().all(|p| p.cmpge(min).all() && p.cmple(max).all()));
+        // A quad's corners are c ± u ± v.
+        let q = quad(Vec3::ZERO, Vec3::X, Vec3::Y, 0);
+        assert_eq!(q.positions[2], Vec3::new(1.0, 1.0, 0.0));
+        assert_eq!(q.normals[0], Vec3::Z);
+    }
 
     /// Welds vertices by position and counts directed edges: a closed, consistently wound
     /// surface has every edge exactly once in each direction.
