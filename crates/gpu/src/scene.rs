@@ -359,25 +359,7 @@ impl SceneGpu {
     /// meshes, materials, texture directory, texel pages 0 and 1, lights). Visible to every stage.
     fn create_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         let vis = wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE;
-        let mut entries = vec![wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: vis,
-            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
-            count: None,
-        }];
-        for binding in 1..=8 {
-            entries.push(wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: vis,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            });
-        }
-        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("scene"), entries: &entries })
+        uniform_and_storage_layout(device, "scene", vis, 8)
     }
 
     /// Writes this frame's camera and environment (before the frame's passes are submitted).
@@ -422,4 +404,25 @@ pub fn gpu_lights(l: &Lights) -> Vec<GpuLight> {
         });
     }
     out
+}
+
+/// A bind group layout of one uniform buffer (binding 0) followed by `storage` read-only storage
+/// buffers (bindings 1..=storage), all visible to `visibility`: the scene's group 0 and the
+/// spheres' group 2.
+pub fn uniform_and_storage_layout(
+    device: &wgpu::Device,
+    label: &str,
+    visibility: wgpu::ShaderStages,
+    storage: u32,
+) -> wgpu::BindGroupLayout {
+    let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+        count: None,
+    };
+    let entries: Vec<wgpu::BindGroupLayoutEntry> = std::iter::once(entry(0, wgpu::BufferBindingType::Uniform))
+        .chain((1..=storage).map(|b| entry(b, wgpu::BufferBindingType::Storage { read_only: true })))
+        .collect();
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
 }

@@ -277,26 +277,7 @@ impl SpheresGpu {
     /// Group 2: binding 0 uniform info, 1..=4 read-only storage (nodes, spheres, ids, clouds);
     /// visible to compute and fragment stages.
     pub fn create_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-        let vis = wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE;
-        let mut entries = vec![wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: vis,
-            ty: wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None },
-            count: None,
-        }];
-        for binding in 1..=4 {
-            entries.push(wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: vis,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            });
-        }
-        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("spheres"), entries: &entries })
+        crate::scene::uniform_and_storage_layout(device, "spheres", wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE, 4)
     }
 }
 

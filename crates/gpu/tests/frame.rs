@@ -7,8 +7,8 @@ use std::sync::Arc;
 
 use hybrid_core::{Frame, FrameSettings, Mode};
 use hybrid_cpu::frame::CpuRenderer;
-use hybrid_gpu::frame::GpuRenderer;
 use hybrid_gpu::GpuContext;
+use hybrid_gpu::frame::GpuRenderer;
 use hybrid_scene::{Scene, demo_scene, load_scene};
 
 mod support;
