@@ -123,6 +123,7 @@ impl<'s> AnyRenderer<'s> {
                     ));
                 }
                 let mut r = GpuRenderer::new(ctx.clone(), scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
+                r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
                 AnyRenderer::Gpu(Box::new(r))
             }

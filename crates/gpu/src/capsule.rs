@@ -37,6 +37,8 @@ pub fn capsule_source() -> String {
 pub struct GpuCapsule {
     device: wgpu::Device,
     trace_pipeline: wgpu::ComputePipeline,
+    /// The same pass with rays stopped at the polygon depth (`CLIP = true`).
+    clipped_pipeline: wgpu::ComputePipeline,
     trace_layout: wgpu::BindGroupLayout,
     unpack_pipeline: wgpu::RenderPipeline,
     unpack_layout: wgpu::BindGroupLayout,
@@ -74,6 +76,17 @@ impl GpuCapsule {
                     },
                     count: None,
                 },
+                // The polygons' reversed-Z depth, read only by the clipped pipeline.
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let module = shaders::module(device, "capsule", &capsule_source());
@@ -82,14 +95,18 @@ impl GpuCapsule {
             bind_group_layouts: &[Some(&scene.layout), Some(&trace_layout), Some(&spheres.layout)],
             immediate_size: 0,
         });
-        let trace_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("capsule"),
-            layout: Some(&layout),
-            module: &module,
-            entry_point: Some("capsule_main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = |label: &str, clip: f64| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some("capsule_main"),
+                compilation_options: wgpu::PipelineCompilationOptions { constants: &[("CLIP", clip)], ..Default::default() },
+                cache: None,
+            })
+        };
+        let trace_pipeline = pipeline("capsule", 0.0);
+        let clipped_pipeline = pipeline("capsule.clipped", 1.0);
 
         let unpack_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("capsule.unpack"),
@@ -115,6 +132,7 @@ impl GpuCapsule {
         Self {
             device: device.clone(),
             trace_pipeline,
+            clipped_pipeline,
             trace_layout,
             unpack_pipeline,
             unpack_layout,
@@ -144,12 +162,15 @@ impl GpuCapsule {
 
     /// Stage 0, blocks D + P: traces one ray per pixel through the spheres and writes
     /// `targets.packed` (the frame uniforms must hold this frame's camera and size).
+    /// `clip_at_depth` (beyond paper 2): each ray stops at the polygon depth already in
+    /// `targets.depth` (the raster ran first), as the CPU capsule's `clip_depth`.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         scene: &SceneGpu,
         spheres: &SpheresGpu,
         targets: &FrameTargets,
+        clip_at_depth: bool,
         timer: &mut StageTimer,
     ) {
         let pixels = targets.width as u64 * targets.height as u64;
@@ -161,27 +182,36 @@ impl GpuCapsule {
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&targets.packed.view) },
                 wgpu::BindGroupEntry { binding: 1, resource: ids.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&targets.depth.view) },
             ],
         });
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("capsule"), timestamp_writes: timer.compute(Stage::Capsule) });
-        pass.set_pipeline(&self.trace_pipeline);
+        pass.set_pipeline(if clip_at_depth { &self.clipped_pipeline } else { &self.trace_pipeline });
         pass.set_bind_group(0, &scene.bind_group, &[]);
         pass.set_bind_group(1, &bind_group, &[]);
         pass.set_bind_group(2, &spheres.bind_group, &[]);
         pass.dispatch_workgroups(targets.width.div_ceil(8), targets.height.div_ceil(8), 1);
     }
 
-    /// Block U: clears the G-buffer (object id to `NO_OBJECT`, the rest 0) and the depth (0,
-    /// reversed-Z far), then writes every RT texel with alpha > 0.1 as the RT surface with its
-    /// depth (compare Greater). The raster pass follows with `clear = false`.
-    pub fn encode_unpack(&self, encoder: &mut wgpu::CommandEncoder, scene: &SceneGpu, targets: &FrameTargets, timer: &mut StageTimer) {
+    /// Block U: writes every RT texel with alpha > 0.1 as the RT surface with its depth
+    /// (compare Greater). `clear = true` (paper 2's order) clears the G-buffer (object id to
+    /// `NO_OBJECT`, the rest 0) and the depth (0, reversed-Z far) first, and the raster pass follows
+    /// with `clear = false`; `clear = false` merges into the polygons already drawn (clipped order).
+    pub fn encode_unpack(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &SceneGpu,
+        targets: &FrameTargets,
+        clear: bool,
+        timer: &mut StageTimer,
+    ) {
         let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("capsule.unpack"),
             layout: &self.unpack_layout,
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&targets.packed.view) }],
         });
-        let mut pass = begin_gbuffer_pass(encoder, targets, true, "capsule.unpack", timer.render(Stage::Capsule));
+        let mut pass = begin_gbuffer_pass(encoder, targets, clear, "capsule.unpack", timer.render(Stage::Capsule));
         pass.set_pipeline(&self.unpack_pipeline);
         pass.set_bind_group(0, &scene.bind_group, &[]);
         pass.set_bind_group(1, &bind_group, &[]);

@@ -52,6 +52,10 @@ pub struct GpuRenderer<'s> {
     /// reflections and refractions (default on). Off gives the paper's behaviour (the RT-scene
     /// only merges by depth): a faster trace stage, at the cost of those effects.
     pub spheres_in_trace: bool,
+    /// Beyond paper 2: trace the capsule after the raster, with rays clipped at the polygon
+    /// depth. Saves the rays that would end behind polygons, at the cost of running the capsule
+    /// after (not beside) the raster.
+    pub clip_capsule_at_raster_depth: bool,
 }
 
 impl<'s> GpuRenderer<'s> {
@@ -78,6 +82,7 @@ impl<'s> GpuRenderer<'s> {
             targets: None,
             prepare_ms: start.elapsed().as_secs_f64() * 1e3,
             spheres_in_trace: true,
+            clip_capsule_at_raster_depth: false,
             trace,
             trace_without_spheres,
             capsule,
@@ -129,23 +134,27 @@ impl<'s> GpuRenderer<'s> {
     ) -> Result<(FrameReport, f64), GpuError> {
         let start = Instant::now();
         let (w, h, mode) = (settings.width, settings.height, settings.mode);
-        let device = &self.ctx.device;
+        let ctx = self.ctx.clone();
+        let device = &ctx.device;
         self.gpu_scene.write_uniforms(&self.ctx, camera, w, h, &self.scene.environment);
         self.timer.begin_frame();
 
         // First submission: stages 0–1 and the pixel count of stage 2.
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame: capsule, raster, count") });
-        on_stage("capsule");
-        if let Some(capsule) = &self.capsule {
-            capsule.encode(&mut enc, &self.gpu_scene, &self.spheres, targets, &mut self.timer);
-            capsule.encode_unpack(&mut enc, &self.gpu_scene, targets, &mut self.timer);
-        }
-        on_stage("raster");
-        let clear = self.capsule.is_none();
-        if mode == Mode::RtOnly {
-            self.primary.encode(&mut enc, &self.gpu_scene, targets, clear, &mut self.timer);
+        let clip = self.clip_capsule_at_raster_depth && self.capsule.is_some();
+        if clip {
+            // Beyond paper 2: polygons first, then the capsule's rays stop at their depth and its
+            // frame is merged into theirs.
+            on_stage("raster");
+            self.geometry_stage(&mut enc, targets, mode, true);
+            on_stage("capsule");
+            self.capsule_stage(&mut enc, targets, true);
         } else {
-            self.raster.encode(&mut enc, &self.gpu_scene, targets, clear, &mut self.timer);
+            // Paper 2: the capsule's frame first, the polygons depth-tested against it.
+            on_stage("capsule");
+            self.capsule_stage(&mut enc, targets, false);
+            on_stage("raster");
+            self.geometry_stage(&mut enc, targets, mode, self.capsule.is_none());
         }
         self.lighting.encode(&mut enc, &self.gpu_scene, targets, &mut self.timer);
         on_stage("heuristic");
@@ -221,6 +230,25 @@ impl<'s> GpuRenderer<'s> {
             }),
         };
         Ok((report, wall))
+    }
+
+    /// Stage 0 (paper 2): the capsule's packed frame (blocks D + P), unpacked into the G-buffer
+    /// (block U). `clipped`: after the raster, rays stopped at the polygons, merged into them.
+    fn capsule_stage(&mut self, enc: &mut wgpu::CommandEncoder, targets: &FrameTargets, clipped: bool) {
+        if let Some(capsule) = &self.capsule {
+            capsule.encode(enc, &self.gpu_scene, &self.spheres, targets, clipped, &mut self.timer);
+            capsule.encode_unpack(enc, &self.gpu_scene, targets, !clipped, &mut self.timer);
+        }
+    }
+
+    /// Stage 1's geometry: the G-buffer rasterized, or from primary rays in rt-only mode;
+    /// `clear = false` keeps (and depth-tests against) the RT layer already there.
+    fn geometry_stage(&mut self, enc: &mut wgpu::CommandEncoder, targets: &FrameTargets, mode: Mode, clear: bool) {
+        if mode == Mode::RtOnly {
+            self.primary.encode(enc, &self.gpu_scene, targets, clear, &mut self.timer);
+        } else {
+            self.raster.encode(enc, &self.gpu_scene, targets, clear, &mut self.timer);
+        }
     }
 
     /// The trace stage with or without the point-cloud spheres (`spheres_in_trace`).

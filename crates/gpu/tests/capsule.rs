@@ -52,8 +52,8 @@ fn render_gpu(ctx: &GpuContext, scene: &Scene, camera: &Camera, w: u32, h: u32) 
     let mut timer = StageTimer::new(ctx);
     timer.begin_frame();
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test") });
-    capsule.encode(&mut encoder, &scene_gpu, &spheres, &targets, &mut timer);
-    capsule.encode_unpack(&mut encoder, &scene_gpu, &targets, &mut timer);
+    capsule.encode(&mut encoder, &scene_gpu, &spheres, &targets, false, &mut timer);
+    capsule.encode_unpack(&mut encoder, &scene_gpu, &targets, true, &mut timer);
     timer.resolve(&mut encoder);
     let t = Instant::now();
     ctx.queue.submit([encoder.finish()]);

@@ -19,9 +19,24 @@ fn context() -> Arc<GpuContext> {
 }
 
 fn render_both(ctx: &Arc<GpuContext>, scene: &Scene, mode: Mode, w: u32, h: u32) -> (Frame, Frame) {
+    render_both_with(ctx, scene, mode, w, h, Options::default())
+}
+
+/// The beyond-the-paper switches, set the same on both backends.
+#[derive(Clone, Copy, Default)]
+struct Options {
+    clip_capsule: bool,
+    no_sphere_effects: bool,
+}
+
+fn render_both_with(ctx: &Arc<GpuContext>, scene: &Scene, mode: Mode, w: u32, h: u32, o: Options) -> (Frame, Frame) {
     let settings = FrameSettings { width: w, height: h, mode };
     let mut cpu = CpuRenderer::new(scene).unwrap();
     let mut gpu = GpuRenderer::new(ctx.clone(), scene).unwrap_or_else(|e| panic!("{e}"));
+    cpu.clip_capsule_at_raster_depth = o.clip_capsule;
+    gpu.clip_capsule_at_raster_depth = o.clip_capsule;
+    cpu.spheres_in_trace = !o.no_sphere_effects;
+    gpu.spheres_in_trace = !o.no_sphere_effects;
     let c = cpu.render(&scene.camera, settings, &mut |_| {});
     let g = gpu.render(&scene.camera, settings, &mut |_| {}).unwrap_or_else(|e| panic!("{e}"));
     (c, g)
@@ -93,4 +108,31 @@ fn pavilion_matches_the_cpu() {
 #[test]
 fn tree_merge_matches_the_cpu() {
     asset_scene("tree-merge.toml", &[]);
+}
+
+/// `--clip-capsule` (capsule after the raster, rays stopped at the polygons) and
+/// `--no-sphere-effects` (spheres only merged by depth) on the tree scan: same buffers as the CPU.
+#[test]
+fn tree_merge_options_match_the_cpu() {
+    let ctx = context();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/tree-merge.toml");
+    let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let packed_hits = |f: &Frame| f.rt_packed.as_ref().expect("packed frame").texels.iter().filter(|t| t[1] >> 8 > 0).count();
+    let mut hits = Vec::new();
+    for (name, o) in [
+        ("clip-capsule", Options { clip_capsule: true, no_sphere_effects: false }),
+        ("no-sphere-effects", Options { clip_capsule: false, no_sphere_effects: true }),
+    ] {
+        for mode in [Mode::Hybrid, Mode::RtOnly] {
+            let (c, g) = render_both_with(&ctx, &scene, mode, 96, 54, o);
+            assert_matches(&format!("tree-merge {name}"), mode, &c, &g, 0.002, &[]);
+            let rt = |f: &Frame| f.gbuffer.object_id.iter().filter(|&&id| id == hybrid_core::RT_SCENE_OBJECT).count();
+            assert!(rt(&g) > 0, "{name} {mode}: no RT-scene pixels on the GPU");
+            assert_eq!(packed_hits(&g), packed_hits(&c), "{name} {mode}: packed-frame hits differ");
+            hits.push(packed_hits(&g));
+        }
+    }
+    // Clipping stops the rays that end behind polygons: fewer capsule hits than unclipped.
+    eprintln!("capsule hits: clipped {} vs unclipped {}", hits[0], hits[2]);
+    assert!(hits[0] < hits[2], "clipping removed no capsule hits ({} vs {})", hits[0], hits[2]);
 }

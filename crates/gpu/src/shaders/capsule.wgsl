@@ -8,6 +8,12 @@
 /// Per pixel the global id of the sphere hit (cloud offset + point index), 0xffffffff on a miss
 /// (for tests and debugging: which sphere each texel shows).
 @group(1) @binding(1) var<storage, read_write> hit_ids: array<u32>;
+/// The polygons' reversed-Z depth (0 = nothing drawn), read when CLIP is set.
+@group(1) @binding(2) var clip_depth: texture_depth_2d;
+
+/// Beyond paper 2 (`--clip-capsule`): stop each ray at the polygon depth, as the CPU capsule's
+/// `clip_depth` (`t = z_e / dir_view_z` with z_e from the depth, RayGen::t_at_depth).
+override CLIP: bool = false;
 
 /// RayGen's `view_inv.transform_vector3(v)`: ((x·vx + y·vy) + z·vz) in glam's order.
 fn capsule_rotate(v: vec3<f32>) -> vec3<f32> {
@@ -60,6 +66,19 @@ fn capsule_main(@builtin(global_invocation_id) gid: vec3<u32>) {
         dir_view_z = dv.z;
         t_min = near / -dv.z;
         t_max = far / -dv.z;
+    }
+
+    if CLIP {
+        let z = textureLoad(clip_depth, vec2<i32>(gid.xy), 0);
+        if z > 0.0 {
+            var z_e: f32;
+            if ortho {
+                z_e = z * (far - near) - far;
+            } else {
+                z_e = -near * far / ((far - near) * z + near);
+            }
+            t_max = min(t_max, z_e / dir_view_z);
+        }
     }
 
     let hit = sphere_closest_hit(origin, dir, t_min, t_max);
