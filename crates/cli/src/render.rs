@@ -117,11 +117,6 @@ impl<'s> AnyRenderer<'s> {
                 AnyRenderer::Cpu(Box::new(r))
             }
             Backend::Gpu(ctx) => {
-                if options.clip_capsule {
-                    return Err(CliError::bad_input(
-                        "--clip-capsule: the GPU backend does not clip the capsule's rays yet; use --backend cpu",
-                    ));
-                }
                 let mut r = GpuRenderer::new(ctx.clone(), scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
