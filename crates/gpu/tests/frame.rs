@@ -54,6 +54,9 @@ fn assert_matches(name: &str, mode: Mode, c: &Frame, g: &Frame, id_slack: f64, l
         assert!(*flip <= limit, "{name} {mode}: {buffer} mean FLIP {flip:.4} > {limit}");
     }
     assert!(cmp.object_id_mismatches as f64 <= id_slack * n, "{name} {mode}: {} object ids differ", cmp.object_id_mismatches);
+    // Same surface, same place: reversed-Z depth and world position agree to float precision.
+    assert!(cmp.max_depth_diff <= 1e-5, "{name} {mode}: depth differs by {:.2e}", cmp.max_depth_diff);
+    assert!(cmp.position_outliers as f64 <= id_slack.max(0.002) * n, "{name} {mode}: {} positions differ", cmp.position_outliers);
     assert!(cmp.mask_mismatches as f64 <= id_slack * n, "{name} {mode}: {} mask pixels differ", cmp.mask_mismatches);
     cmp
 }

@@ -57,14 +57,18 @@ pub struct BufferComparison {
     pub mask_mismatches: usize,
     /// Largest depth difference where both backends drew the same object.
     pub max_depth_diff: f32,
+    /// Pixels there whose world positions differ by more than 1e-3 relative (to the distance
+    /// from the origin, at least 1): grazing surfaces, where a sub-pixel difference in where the
+    /// pixel centre lands on the triangle moves the point far.
+    pub position_outliers: usize,
 }
 
 impl fmt::Display for BufferComparison {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "ids differ {}, mask differs {}, max depth diff {:.2e}; FLIP",
-            self.object_id_mismatches, self.mask_mismatches, self.max_depth_diff
+            "ids differ {}, mask differs {}, max depth diff {:.2e}, position outliers {}; FLIP",
+            self.object_id_mismatches, self.mask_mismatches, self.max_depth_diff, self.position_outliers
         )?;
         for (name, v) in &self.flip {
             write!(f, " {name} {v:.4}")?;
@@ -80,6 +84,9 @@ fn gbuffer_flips(w: u32, h: u32, c: &GBuffer, g: &GBuffer, out: &mut Vec<(&'stat
     out.push(("ambient", mean_flip_linear(w, h, &c.ambient, &g.ambient)));
     out.push(("diffuse", mean_flip_linear(w, h, &rgb(&c.diffuse), &rgb(&g.diffuse))));
     out.push(("specular", mean_flip_linear(w, h, &rgb(&c.specular), &rgb(&g.specular))));
+    // Reflectivity, IOR (÷ 3, into 0..1 for IORs up to 3) and opacity as an image.
+    let optical = |v: &[Vec3]| v.iter().map(|o| Vec3::new(o.x, o.y / 3.0, o.z)).collect::<Vec<_>>();
+    out.push(("optical", mean_flip_linear(w, h, &optical(&c.optical), &optical(&g.optical))));
 }
 
 /// Compares every buffer of two frames of the same size.
@@ -96,9 +103,9 @@ pub fn compare_frames(c: &Frame, g: &Frame) -> BufferComparison {
     let (cg, gg) = (&c.gbuffer, &g.gbuffer);
     let object_id_mismatches = cg.object_id.iter().zip(&gg.object_id).filter(|(a, b)| a != b).count();
     let mask_mismatches = cg.mask.iter().zip(&gg.mask).filter(|(a, b)| (**a > 0.0) != (**b > 0.0)).count();
-    let max_depth_diff = (0..cg.len())
-        .filter(|&i| cg.object_id[i] == gg.object_id[i] && cg.object_id[i] != NO_OBJECT)
-        .map(|i| (cg.depth[i] - gg.depth[i]).abs())
-        .fold(0.0, f32::max);
-    BufferComparison { flip, object_id_mismatches, mask_mismatches, max_depth_diff }
+    let same: Vec<usize> = (0..cg.len()).filter(|&i| cg.object_id[i] == gg.object_id[i] && cg.object_id[i] != NO_OBJECT).collect();
+    let max_depth_diff = same.iter().map(|&i| (cg.depth[i] - gg.depth[i]).abs()).fold(0.0, f32::max);
+    let position_outliers =
+        same.iter().filter(|&&i| (cg.position[i] - gg.position[i]).length() > 1e-3 * cg.position[i].length().max(1.0)).count();
+    BufferComparison { flip, object_id_mismatches, mask_mismatches, max_depth_diff, position_outliers }
 }
