@@ -686,7 +686,8 @@ fn build_rec(prims: &mut [Prim], pb: PrimBounds, offset: u32, depth: u32) -> Bui
     let parts = match split {
         Some((axis, bin, cost)) if cost < packs_of(n) * INTERSECT_COST || n > MAX_LEAF => {
             let scale = bin_scale(&cb, nb);
-            partition(prims, |p| bins_of(p.centroid2(), cb.min, scale, nb)[axis] <= bin)
+            let (lo, sc) = (cb.min[axis], scale[axis]);
+            partition(prims, |p| bin_of(p.lo[axis] + p.hi[axis], lo, sc, nb) <= bin)
         }
         Some(_) => return leaf,
         None => (0, PrimBounds::EMPTY, PrimBounds::EMPTY),
@@ -721,6 +722,15 @@ fn bins_of(c: Vec3A, lo: Vec3A, scale: Vec3A, nb: usize) -> [usize; 3] {
     const MAGIC: f32 = 8_388_608.0;
     let x = ((c - lo) * scale - Vec3A::splat(0.5)).clamp(Vec3A::ZERO, Vec3A::splat(nb as f32 - 1.0)) + Vec3A::splat(MAGIC);
     x.to_array().map(|v| (v.to_bits() as usize) & (BINS - 1))
+}
+
+/// [`bins_of`] on one axis (the same operations in the same order, so the same bin): the
+/// partition needs only the split axis.
+#[inline(always)]
+fn bin_of(c: f32, lo: f32, scale: f32, nb: usize) -> usize {
+    const MAGIC: f32 = 8_388_608.0;
+    let x = ((c - lo) * scale - 0.5).clamp(0.0, nb as f32 - 1.0) + MAGIC;
+    (x.to_bits() as usize) & (BINS - 1)
 }
 
 /// Bins per unit on each axis of a centroid box (0 on axes without a usable extent).
@@ -1082,6 +1092,22 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&s| s == 1));
+    }
+
+    #[test]
+    fn one_axis_bin_equals_simd_bins() {
+        let mut rng = StdRng::seed_from_u64(17);
+        let special = [0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30, f32::MIN_POSITIVE];
+        for k in 0..20_000 {
+            let mut r = || if k % 7 == 0 { special[rng.random_range(0..special.len())] } else { rng.random_range(-10.0f32..10.0) };
+            let (c, lo) = (Vec3A::new(r(), r(), r()), Vec3A::new(r(), r(), r()));
+            let scale = Vec3A::new(r().abs(), r().abs(), r().abs());
+            let nb = 4 + k % 13;
+            let all = bins_of(c, lo, scale, nb);
+            for axis in 0..3 {
+                assert_eq!(bin_of(c[axis], lo[axis], scale[axis], nb), all[axis], "{c} {lo} {scale} {nb}");
+            }
+        }
     }
 
     #[test]
