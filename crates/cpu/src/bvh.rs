@@ -759,17 +759,37 @@ impl Bins {
     }
 }
 
-fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
-    let mut bins = Bins::EMPTY;
-    for p in prims {
+impl Bins {
+    #[inline(always)]
+    fn add(&mut self, p: &Prim, lo: Vec3A, scale: Vec3A, nb: usize) {
         let b = bins_of(p.centroid2(), lo, scale, nb);
         let pb = p.bounds();
-        for ((bounds, counts), b) in bins.bounds.iter_mut().zip(&mut bins.counts).zip(b) {
+        for ((bounds, counts), b) in self.bounds.iter_mut().zip(&mut self.counts).zip(b) {
             bounds[b].grow(&pb);
             counts[b] += 1;
         }
     }
-    bins
+}
+
+/// Primitives from which binning alternates between two sets of bins (merged at the end, exact
+/// min/max/count, so the same result): consecutive primitives often fall in the same bins, and
+/// one set would chain every update on the previous one through memory.
+const BIN_TWO_WAY_MIN: usize = 64;
+
+fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
+    let mut bins = Bins::EMPTY;
+    if prims.len() < BIN_TWO_WAY_MIN {
+        prims.iter().for_each(|p| bins.add(p, lo, scale, nb));
+        return bins;
+    }
+    let mut odd = Bins::EMPTY;
+    let mut pairs = prims.chunks_exact(2);
+    for pair in &mut pairs {
+        bins.add(&pair[0], lo, scale, nb);
+        odd.add(&pair[1], lo, scale, nb);
+    }
+    pairs.remainder().iter().for_each(|p| bins.add(p, lo, scale, nb));
+    bins.merge(odd)
 }
 
 /// Binned SAH with `nb ≤ BINS` bins over all three axes at once (one pass over the primitives,
