@@ -686,7 +686,8 @@ fn build_rec(prims: &mut [Prim], pb: PrimBounds, offset: u32, depth: u32) -> Bui
     let parts = match split {
         Some((axis, bin, cost)) if cost < packs_of(n) * INTERSECT_COST || n > MAX_LEAF => {
             let scale = bin_scale(&cb, nb);
-            partition(prims, |p| bins_of(p.centroid2(), cb.min, scale, nb)[axis] <= bin)
+            let (lo, sc) = (cb.min[axis], scale[axis]);
+            partition(prims, |p| bin_of(p.lo[axis] + p.hi[axis], lo, sc, nb) <= bin)
         }
         Some(_) => return leaf,
         None => (0, PrimBounds::EMPTY, PrimBounds::EMPTY),
@@ -723,6 +724,15 @@ fn bins_of(c: Vec3A, lo: Vec3A, scale: Vec3A, nb: usize) -> [usize; 3] {
     x.to_array().map(|v| (v.to_bits() as usize) & (BINS - 1))
 }
 
+/// [`bins_of`] on one axis (the same operations in the same order, so the same bin): the
+/// partition needs only the split axis.
+#[inline(always)]
+fn bin_of(c: f32, lo: f32, scale: f32, nb: usize) -> usize {
+    const MAGIC: f32 = 8_388_608.0;
+    let x = ((c - lo) * scale - 0.5).clamp(0.0, nb as f32 - 1.0) + MAGIC;
+    (x.to_bits() as usize) & (BINS - 1)
+}
+
 /// Bins per unit on each axis of a centroid box (0 on axes without a usable extent).
 fn bin_scale(cb: &Bounds, nb: usize) -> Vec3A {
     let extent = cb.max - cb.min;
@@ -749,17 +759,37 @@ impl Bins {
     }
 }
 
-fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
-    let mut bins = Bins::EMPTY;
-    for p in prims {
+impl Bins {
+    #[inline(always)]
+    fn add(&mut self, p: &Prim, lo: Vec3A, scale: Vec3A, nb: usize) {
         let b = bins_of(p.centroid2(), lo, scale, nb);
         let pb = p.bounds();
-        for ((bounds, counts), b) in bins.bounds.iter_mut().zip(&mut bins.counts).zip(b) {
+        for ((bounds, counts), b) in self.bounds.iter_mut().zip(&mut self.counts).zip(b) {
             bounds[b].grow(&pb);
             counts[b] += 1;
         }
     }
-    bins
+}
+
+/// Primitives from which binning alternates between two sets of bins (merged at the end, exact
+/// min/max/count, so the same result): consecutive primitives often fall in the same bins, and
+/// one set would chain every update on the previous one through memory.
+const BIN_TWO_WAY_MIN: usize = 64;
+
+fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
+    let mut bins = Bins::EMPTY;
+    if prims.len() < BIN_TWO_WAY_MIN {
+        prims.iter().for_each(|p| bins.add(p, lo, scale, nb));
+        return bins;
+    }
+    let mut odd = Bins::EMPTY;
+    let mut pairs = prims.chunks_exact(2);
+    for pair in &mut pairs {
+        bins.add(&pair[0], lo, scale, nb);
+        odd.add(&pair[1], lo, scale, nb);
+    }
+    pairs.remainder().iter().for_each(|p| bins.add(p, lo, scale, nb));
+    bins.merge(odd)
 }
 
 /// Binned SAH with `nb ≤ BINS` bins over all three axes at once (one pass over the primitives,
@@ -1082,6 +1112,22 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&s| s == 1));
+    }
+
+    #[test]
+    fn one_axis_bin_equals_simd_bins() {
+        let mut rng = StdRng::seed_from_u64(17);
+        let special = [0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30, f32::MIN_POSITIVE];
+        for k in 0..20_000 {
+            let mut r = || if k % 7 == 0 { special[rng.random_range(0..special.len())] } else { rng.random_range(-10.0f32..10.0) };
+            let (c, lo) = (Vec3A::new(r(), r(), r()), Vec3A::new(r(), r(), r()));
+            let scale = Vec3A::new(r().abs(), r().abs(), r().abs());
+            let nb = 4 + k % 13;
+            let all = bins_of(c, lo, scale, nb);
+            for axis in 0..3 {
+                assert_eq!(bin_of(c[axis], lo[axis], scale[axis], nb), all[axis], "{c} {lo} {scale} {nb}");
+            }
+        }
     }
 
     #[test]
