@@ -105,7 +105,9 @@ impl<'s> PreparedScene<'s> {
         let material = &self.scene.materials[mesh.material];
         let positions = [mesh.positions[i0], mesh.positions[i1], mesh.positions[i2]];
         let normals = corners(&mesh.normals);
-        let geometric = geometric_normal(positions);
+        // Smooth triangles need the geometric normal only where the interpolated one cannot be
+        // normalised ([`TriangleSurface::at`] computes it there).
+        let geometric = if normals.is_none() { geometric_normal(positions) } else { Vec3::Y };
         let tangents = if material.normal_map.is_some() && !mesh.tangents.is_empty() {
             Some([mesh.tangents[i0], mesh.tangents[i1], mesh.tangents[i2]])
         } else {
@@ -144,6 +146,7 @@ pub struct TriangleSurface<'a> {
     textures: &'a [Texture],
     positions: [Vec3; 3],
     normals: Option<[Vec3; 3]>,
+    /// The geometric normal, for flat triangles only (`normals` is `None`).
     geometric: Vec3,
     uvs: Option<[Vec2; 3]>,
     colors: Option<[Vec3; 3]>,
@@ -174,7 +177,12 @@ impl TriangleSurface<'_> {
         let position = lerp3(self.positions);
         let mut normal = match self.normals {
             None => self.geometric,
-            Some(n) => lerp3(n).normalize_or(self.geometric),
+            // `normalize_or(geometric_normal(..))`, the fallback only computed when taken.
+            Some(n) => {
+                let n = lerp3(n);
+                let rcp = n.length_recip();
+                if rcp.is_finite() && rcp > 0.0 { n * rcp } else { geometric_normal(self.positions) }
+            }
         };
         let mat = self.material;
         let color = self.colors.map_or(Vec3::ONE, lerp3);
@@ -197,9 +205,10 @@ impl TriangleSurface<'_> {
         let tex = self.textures;
         let uv = mat.offset + uv * mat.tiling;
         let footprint = uv_footprint * mat.tiling.abs().max_element();
+        // Absent maps sample as 1 (inline); present ones through one out-of-line call each.
         let sample = |id: Option<usize>| -> Vec4 {
             match id {
-                Some(id) => sample_texture(&tex[id], uv, footprint),
+                Some(id) => sample_map(&tex[id], uv, footprint),
                 None => Vec4::ONE,
             }
         };
@@ -247,8 +256,20 @@ pub fn sample_texture(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
     let lod = if lod.is_finite() { lod.clamp(0.0, max) } else { 0.0 };
     let l0 = floor(lod);
     let f = lod - l0;
-    let a = bilinear(t, uv, l0 as usize);
-    if f <= 1e-4 { a } else { a.lerp(bilinear(t, uv, l0 as usize + 1), f) }
+    if !uv.x.is_finite() || !uv.y.is_finite() {
+        let a = bilinear(t, uv, l0 as usize);
+        return if f <= 1e-4 { a } else { a.lerp(bilinear(t, uv, l0 as usize + 1), f) };
+    }
+    // The UV's wrapped fraction is the same for both levels: computed once.
+    let frac = Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y));
+    let a = bilinear_frac(t, uv, frac, l0 as usize);
+    if f <= 1e-4 { a } else { a.lerp(bilinear_frac(t, uv, frac, l0 as usize + 1), f) }
+}
+
+/// [`sample_texture`], never inlined (keeps [`TriangleSurface::at`]'s map lookups small).
+#[inline(never)]
+fn sample_map(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
+    sample_texture(t, uv, footprint)
 }
 
 /// `x.floor()`, bit for bit (signed zeros included), without a library call or a saturating
@@ -260,8 +281,9 @@ fn floor(x: f32) -> f32 {
     if a < BIG {
         // Round |x| to an integer (adding and removing 2²³), give it x's sign, and step down
         // where that rounded up.
+        // (r − 0 = r for either zero, so the step is branch-free.)
         let r = ((a + BIG) - BIG).copysign(x);
-        if r > x { r - 1.0 } else { r }
+        r - if r > x { 1.0 } else { 0.0 }
     } else {
         // Integral, infinite or NaN: floor is the identity.
         x
@@ -281,12 +303,19 @@ fn decode_tables() -> &'static ([f32; 256], [f32; 256]) {
 #[inline]
 fn bilinear(t: &Texture, uv: Vec2, level: usize) -> Vec4 {
     let level = level.min(t.levels.len() - 1);
-    let l = &t.levels[level];
     if !uv.x.is_finite() || !uv.y.is_finite() {
         return t.texel(level, 0, 0);
     }
-    let x = (uv.x - floor(uv.x)) * l.width as f32 - 0.5;
-    let y = (uv.y - floor(uv.y)) * l.height as f32 - 0.5;
+    bilinear_frac(t, uv, Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y)), level)
+}
+
+/// [`bilinear`] for a finite `uv` whose wrapped fraction `frac` (`uv − floor(uv)`) is given.
+#[inline]
+fn bilinear_frac(t: &Texture, uv: Vec2, frac: Vec2, level: usize) -> Vec4 {
+    let level = level.min(t.levels.len() - 1);
+    let l = &t.levels[level];
+    let x = frac.x * l.width as f32 - 0.5;
+    let y = frac.y * l.height as f32 - 0.5;
     let (x0, y0) = (floor(x), floor(y));
     let (fx, fy) = (x - x0, y - y0);
     // With a finite UV the fraction is in [0, 1], so x0 ∈ [−1, width − 1] (y0 likewise): the

@@ -23,7 +23,7 @@ use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
-use crate::prepare::{PreparedScene, TriangleSurface};
+use crate::prepare::{PreparedScene, TriangleRef, TriangleSurface};
 
 /// Rows per band (the unit of parallel work and of binning).
 pub const BAND_ROWS: u32 = 16;
@@ -280,7 +280,7 @@ struct RasterTri {
 /// each as value at the reference pixel centre (x0 + 0.5, y0 + 0.5) and gradient per pixel.
 #[derive(Clone, Copy, Debug)]
 struct ShadeTri {
-    triangle: u32,
+    triangle: TriangleRef,
     ref_px: [f32; 2],
     /// Per corner i: (b_i/w at the reference, d/dx, d/dy).
     planes: [Vec3; 3],
@@ -339,8 +339,7 @@ fn setup_chunk(
     // Sized for every triangle up front: no reallocation while filling.
     raster.reserve(end - first);
     shade.reserve(end - first);
-    for (g, t) in prepared.triangles[first..end].iter().enumerate() {
-        let g = (first + g) as u32;
+    for t in &prepared.triangles[first..end] {
         let mesh = &prepared.meshes[t.mesh as usize];
         let idx = mesh.indices[t.triangle as usize];
         let mv = &verts[mesh_base[t.mesh as usize]..mesh_base[t.mesh as usize + 1]];
@@ -355,7 +354,7 @@ fn setup_chunk(
             let tri = [[a.fx, a.fy], [b.fx, b.fy], [c.fx, c.fy]];
             if let Some(rt) = coverage(tri, vpt) {
                 // Planes are only built for triangles that cover a pixel centre.
-                if let Some((rt, st)) = planes(rt, clip, g, vpt) {
+                if let Some((rt, st)) = planes(rt, clip, *t, vpt) {
                     raster.push(rt);
                     shade.push(st);
                 }
@@ -369,7 +368,7 @@ fn setup_chunk(
                     [x, y]
                 });
                 if let Some(rt) = coverage(tri, vpt)
-                    && let Some((rt, st)) = planes(rt, clip, g, vpt)
+                    && let Some((rt, st)) = planes(rt, clip, *t, vpt)
                 {
                     raster.push(rt);
                     shade.push(st);
@@ -490,7 +489,7 @@ fn area2(v: [[i32; 2]; 3]) -> i64 {
 /// `b_i / w = P_i · (px, py, 1)` with `P = M⁻¹ S`, M the homogeneous (x, y, w) corner matrix and
 /// S the pixel → NDC map. Valid for any corner signs of w, so clipped pieces share the planes.
 /// Depth (z/w, reversed-Z) is `Σ z_i P_i`, affine in screen space.
-fn planes(mut rt: RasterTri, clip: [Vec4; 3], triangle: u32, vpt: &Viewport) -> Option<(RasterTri, ShadeTri)> {
+fn planes(mut rt: RasterTri, clip: [Vec4; 3], triangle: TriangleRef, vpt: &Viewport) -> Option<(RasterTri, ShadeTri)> {
     let m = DMat3::from_cols(
         DVec3::new(clip[0].x as f64, clip[0].y as f64, clip[0].w as f64),
         DVec3::new(clip[1].x as f64, clip[1].y as f64, clip[1].w as f64),
@@ -773,7 +772,7 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     rows.into_par_iter()
         .enumerate()
         .with_max_len(1)
-        .for_each_init(|| (Vec::<f32>::new(), Vec::<u32>::new()), |(depth, ids), (band, mut out)| ctx.band(band, &mut out, depth, ids));
+        .for_each_init(BandScratch::default, |scratch, (band, mut out)| ctx.band(band, &mut out, scratch));
     SCRATCH.with(|s| *s.borrow_mut() = scratch);
 }
 
@@ -805,7 +804,8 @@ struct BandContext<'a, 's> {
 }
 
 impl BandContext<'_, '_> {
-    fn band(&self, band: usize, out: &mut BandRows, depth: &mut Vec<f32>, ids: &mut Vec<u32>) {
+    fn band(&self, band: usize, out: &mut BandRows, scratch: &mut BandScratch) {
+        let BandScratch { depth, ids } = scratch;
         let w = self.width as usize;
         let y_lo = band as u32 * BAND_ROWS;
         let y_hi = (y_lo + BAND_ROWS).min(self.height);
@@ -835,47 +835,38 @@ impl BandContext<'_, '_> {
             }
         }
 
-        // Shading of the winners. Consecutive pixels mostly share their winner: its corner
+        // Shading of the winners, row by row in runs of one winner: its planes, corner
         // attributes and material are gathered once per run.
-        let mut cached: Option<(u32, u32, &ShadeTri, TriangleSurface<'_>)> = None;
-        let (mut x, mut y) = (0u32, y_lo);
-        for i in 0..len {
-            // (x, y) of pixel i, stepped (no division per pixel).
-            if i > 0 {
-                x += 1;
-                if x == self.width {
-                    x = 0;
-                    y += 1;
-                }
-            }
-            match ids[i] {
-                VIS_NONE => {
-                    if self.clear {
-                        out.clear(i);
-                    }
-                }
-                VIS_RT => {
-                    let color = self.rt_layer.map_or(Vec3::ZERO, |l| l.color[base + i]);
-                    out.write(i, RT_SCENE_OBJECT, depth[i], &self.unproject.rt_surface(x, y, depth[i], color));
-                    if self.clear {
-                        out.mask[i] = 0.0;
-                    }
-                }
-                id => {
-                    let (object, st, ts) = match cached {
-                        Some((cid, object, st, ts)) if cid == id => (object, st, ts),
-                        _ => {
-                            let st = &self.chunks[(id >> CHUNK_SHIFT) as usize].shade[(id & ((1 << CHUNK_SHIFT) - 1)) as usize];
-                            let t = self.prepared.triangles[st.triangle as usize];
-                            let object = self.prepared.meshes[t.mesh as usize].object;
-                            let ts = self.prepared.triangle_surface(t);
-                            cached = Some((id, object, st, ts));
-                            (object, st, ts)
+        let rows = (y_hi - y_lo) as usize;
+        for row in 0..rows {
+            let y = y_lo + row as u32;
+            let rb = row * w;
+            let mut x = 0usize;
+            while x < w {
+                let i = rb + x;
+                match ids[i] {
+                    VIS_NONE => {
+                        if self.clear {
+                            out.clear(i);
                         }
-                    };
-                    out.write(i, object, depth[i], &shade(st, &ts, x, y));
-                    if self.clear {
-                        out.mask[i] = 0.0;
+                        x += 1;
+                    }
+                    VIS_RT => {
+                        let color = self.rt_layer.map_or(Vec3::ZERO, |l| l.color[base + i]);
+                        out.write(i, RT_SCENE_OBJECT, depth[i], &self.unproject.rt_surface(x as u32, y, depth[i], color));
+                        if self.clear {
+                            out.mask[i] = 0.0;
+                        }
+                        x += 1;
+                    }
+                    id => {
+                        let end = ids[i + 1..rb + w].iter().position(|&o| o != id).map_or(w, |k| x + 1 + k);
+                        let st = &self.chunks[(id >> CHUNK_SHIFT) as usize].shade[(id & ((1 << CHUNK_SHIFT) - 1)) as usize];
+                        let ts = self.prepared.triangle_surface(st.triangle);
+                        let object = self.prepared.meshes[st.triangle.mesh as usize].object;
+                        let px = Pixels { out: &mut *out, row_base: rb, depth, object, clear: self.clear };
+                        shade_run(st, &ts, x as u32, end as u32, y, px);
+                        x = end;
                     }
                 }
             }
@@ -883,30 +874,97 @@ impl BandContext<'_, '_> {
     }
 }
 
+/// A band worker's buffers, reused from band to band.
+#[derive(Default)]
+struct BandScratch {
+    /// The band's visibility buffer: depth and winner id per pixel.
+    depth: Vec<f32>,
+    ids: Vec<u32>,
+}
+
+/// Clamps perspective-correct barycentrics to the triangle (covered pixels lie inside the
+/// snapped triangle; this removes the tiny overshoot of snapping); `None` → the centroid.
+#[inline]
+fn clamp_bary(b: Option<Vec3>) -> Vec3 {
+    b.map_or(Vec3::splat(1.0 / 3.0), |b| {
+        let b = b.max(Vec3::ZERO);
+        let s = b.x + b.y + b.z;
+        if s > 0.0 { b / s } else { Vec3::splat(1.0 / 3.0) }
+    })
+}
+
+/// Where [`shade_run`] writes: one row of a band's G-buffer rows.
+struct Pixels<'a, 'b> {
+    out: &'a mut BandRows<'b>,
+    /// Index of the row's first pixel in the band.
+    row_base: usize,
+    depth: &'a [f32],
+    object: u32,
+    clear: bool,
+}
+
+impl Pixels<'_, '_> {
+    #[inline(always)]
+    fn emit(&mut self, x: u32, s: &Surface) {
+        let j = self.row_base + x as usize;
+        self.out.write(j, self.object, self.depth[j], s);
+        if self.clear {
+            self.out.mask[j] = 0.0;
+        }
+    }
+}
+
+/// The surfaces of the winning triangle at pixels `x0..x1` of row `y` (one run of one winner),
+/// written to `px`; every pixel exactly as [`shade`] gives it.
+#[inline]
+fn shade_run(st: &ShadeTri, ts: &TriangleSurface<'_>, x0: u32, x1: u32, y: u32, mut px_out: Pixels<'_, '_>) {
+    let py = y as f32 + 0.5;
+    match ts.uvs() {
+        // Pixel centres x + 0.5 are exact in f32 below 2²², so the planes one pixel right of
+        // pixel x (`px + 1`) are those of pixel x + 1 bit for bit: computed once, used twice.
+        Some(uvs) if ts.uses_footprint() && x1 < 1 << 22 => {
+            let mut here = st.bary(x0 as f32 + 0.5, py);
+            for x in x0..x1 {
+                let px = x as f32 + 0.5;
+                let right = st.bary((x + 1) as f32 + 0.5, py);
+                let down = st.bary(px, py + 1.0);
+                let b = clamp_bary(here);
+                px_out.emit(x, &ts.at(b, footprint(uvs, b, right, down)));
+                here = right;
+            }
+        }
+        _ => {
+            for x in x0..x1 {
+                px_out.emit(x, &shade(st, ts, x, y));
+            }
+        }
+    }
+}
+
+/// UV change per pixel (the larger of the steps one pixel right and one down) at clamped
+/// barycentrics `b`, given the raw barycentrics of those two neighbours; 0 when unknown.
+#[inline]
+fn footprint([u0, u1, u2]: [glam::Vec2; 3], b: Vec3, right: Option<Vec3>, down: Option<Vec3>) -> f32 {
+    let uv = |b: Vec3| u0 * b.x + u1 * b.y + u2 * b.z;
+    let at = uv(b);
+    // Screen derivatives of the UV: the same planes one pixel right and one pixel down.
+    let dx = right.map(|b| uv(b).distance(at));
+    let dy = down.map(|b| uv(b).distance(at));
+    let f = match (dx, dy) {
+        (Some(a), Some(b)) => a.max(b),
+        (Some(a), None) | (None, Some(a)) => a,
+        (None, None) => 0.0,
+    };
+    if f.is_finite() { f } else { 0.0 }
+}
+
 /// The surface of the winning triangle at pixel (x, y).
 #[inline]
 fn shade(st: &ShadeTri, ts: &TriangleSurface<'_>, x: u32, y: u32) -> Surface {
     let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-    // Covered pixels lie inside the snapped triangle; clamp the tiny overshoot of snapping.
-    let b = st.bary(px, py).map_or(Vec3::splat(1.0 / 3.0), |b| {
-        let b = b.max(Vec3::ZERO);
-        let s = b.x + b.y + b.z;
-        if s > 0.0 { b / s } else { Vec3::splat(1.0 / 3.0) }
-    });
+    let b = clamp_bary(st.bary(px, py));
     let footprint = match ts.uvs() {
-        Some([u0, u1, u2]) if ts.uses_footprint() => {
-            let uv = |b: Vec3| u0 * b.x + u1 * b.y + u2 * b.z;
-            let at = uv(b);
-            // Screen derivatives of the UV: the same planes one pixel right and one pixel down.
-            let dx = st.bary(px + 1.0, py).map(|b| uv(b).distance(at));
-            let dy = st.bary(px, py + 1.0).map(|b| uv(b).distance(at));
-            let f = match (dx, dy) {
-                (Some(a), Some(b)) => a.max(b),
-                (Some(a), None) | (None, Some(a)) => a,
-                (None, None) => 0.0,
-            };
-            if f.is_finite() { f } else { 0.0 }
-        }
+        Some(uvs) if ts.uses_footprint() => footprint(uvs, b, st.bary(px + 1.0, py), st.bary(px, py + 1.0)),
         _ => 0.0,
     };
     ts.at(b, footprint)
@@ -1097,6 +1155,61 @@ mod tests {
                         assert_eq!(k, 1, "({x}, {y}) missing");
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn shade_run_matches_shade_bit_for_bit() {
+        use glam::Vec2;
+        use hybrid_scene::{ColorSpace, Material, Mesh, Object, ObjectSource, Scene, Texture, Transform};
+        let texels = (0..64u32 * 32).map(|i| [(i * 7) as u8, (i * 13 + 5) as u8, (i * 29) as u8, (i * 3 + 100) as u8]).collect();
+        let mut scene = Scene::new(Camera::default());
+        scene.textures = vec![Texture::new("t", 64, 32, texels, ColorSpace::Srgb)];
+        scene.materials = vec![
+            Material { diffuse_map: Some(0), specular_map: Some(0), tiling: Vec2::new(3.0, 2.0), ..Material::default() },
+            Material::default(),
+        ];
+        let mesh = |material: usize, smooth: bool| Mesh {
+            positions: vec![Vec3::new(-1.0, 0.0, 0.0), Vec3::new(2.0, 0.5, -1.0), Vec3::new(0.0, 3.0, 0.5)],
+            normals: if smooth { vec![Vec3::Z, Vec3::new(0.3, 0.1, 0.9), Vec3::new(-0.2, 0.4, 0.8)] } else { Vec::new() },
+            uvs: vec![Vec2::new(0.1, 0.2), Vec2::new(1.7, 0.4), Vec2::new(0.6, 2.3)],
+            indices: vec![[0, 1, 2]],
+            material,
+            ..Default::default()
+        };
+        scene.objects = vec![Object {
+            name: "o".into(),
+            source: ObjectSource::Plane,
+            transform: Transform::default(),
+            meshes: vec![mesh(0, true), mesh(0, false), mesh(1, true)],
+            relevance: 1.0,
+            cost: 1.0,
+        }];
+        let prepared = PreparedScene::new(&scene);
+        let (w, h) = (37u32, 5u32);
+        let mut rng = Rng(0x0123_4567_89ab_cdef);
+        let mut f = || (rng.next() % 2001) as f32 / 1000.0 - 1.0;
+        for (k, &t) in prepared.triangles.iter().enumerate() {
+            let ts = prepared.triangle_surface(t);
+            for _ in 0..20 {
+                // Planes of a plausible perspective triangle, and some with a sign change of
+                // their sum inside the row (non-finite and clamped barycentrics).
+                let planes = [0, 1, 2].map(|_| Vec3::new(f() + 1.2, f() * 0.05, f() * 0.05));
+                let planes = if k % 2 == 0 { planes } else { planes.map(|p| p - Vec3::new(1.5, 0.0, 0.0)) };
+                let st = ShadeTri { triangle: t, ref_px: [3.5, 1.5], planes };
+                let (mut a, mut b) = (GBuffer::new(w, h), GBuffer::new(w, h));
+                for y in 0..h {
+                    let (x0, x1) = (y * 3, w - y);
+                    for x in x0..x1 {
+                        a.write((y * w + x) as usize, 7, 0.5, &shade(&st, &ts, x, y));
+                    }
+                    let depth = vec![0.5f32; (w * h) as usize];
+                    let mut rows = split_bands(&mut b, (w * h) as usize);
+                    let px = Pixels { out: &mut rows[0], row_base: (y * w) as usize, depth: &depth, object: 7, clear: false };
+                    shade_run(&st, &ts, x0, x1, y, px);
+                }
+                assert_eq!(a, b, "triangle {t:?}, planes {planes:?}");
             }
         }
     }
