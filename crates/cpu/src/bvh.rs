@@ -143,7 +143,7 @@ const NO_TRI: TriangleRef = TriangleRef { mesh: u32::MAX, triangle: u32::MAX };
 
 /// Shadow transparency of a slot whose opacity varies over a texture: evaluated with
 /// `surface_at` at the hit.
-const EVALUATE: f32 = -1.0;
+pub const SHADOW_EVALUATE: f32 = -1.0;
 
 /// Triangle BVH over every triangle of a [`PreparedScene`].
 #[derive(Debug, Clone)]
@@ -156,7 +156,7 @@ pub struct SceneBvh {
     pack_shadow: Vec<u8>,
     /// Triangle of each pack slot (`pack · 4 + lane`); [`NO_TRI`] for unused lanes.
     slot_ref: Vec<TriangleRef>,
-    /// Shadow-ray transparency of each pack slot (1 − opacity), or [`EVALUATE`].
+    /// Shadow-ray transparency of each pack slot (1 − opacity), or [`SHADOW_EVALUATE`].
     slot_shadow: Vec<f32>,
     triangles: usize,
     leaves: usize,
@@ -265,13 +265,14 @@ impl Prim {
 
 /// Shadow-ray transparency of a material: 1 when it casts no shadows, its constant
 /// `1 − opacity` when no texture can change it (no maps, or maps whose relevant channel is the
-/// same in every texel of level 0, the level shadow rays sample), else [`EVALUATE`].
-fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
+/// same in every texel of level 0, the level shadow rays sample), else [`SHADOW_EVALUATE`]. The GPU
+/// backend's BVH uses the same classes.
+pub fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
     if !m.casts_shadows || m.opacity <= 0.0 {
         return 1.0;
     }
     if !m.opacity.is_finite() {
-        return EVALUATE;
+        return SHADOW_EVALUATE;
     }
     // The value of texture channel `c` if it is the same everywhere on level 0.
     let constant = |id: Option<usize>, c: usize| -> Option<f32> {
@@ -283,7 +284,7 @@ fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
     };
     match (constant(m.diffuse_map, 3), constant(m.optical_map, 2)) {
         (Some(a), Some(b)) => 1.0 - (m.opacity * a * b).clamp(0.0, 1.0),
-        _ => EVALUATE,
+        _ => SHADOW_EVALUATE,
     }
 }
 
@@ -557,7 +558,7 @@ impl SceneBvh {
                 let lane = mask.trailing_zeros() as usize & 3;
                 mask &= mask - 1;
                 let tr = self.slot_shadow[slot0 + lane];
-                let tr = if tr == EVALUATE {
+                let tr = if tr == SHADOW_EVALUATE {
                     let s = prepared.surface_at(self.slot_ref[slot0 + lane], Vec3::new(1.0 - u[lane] - v[lane], u[lane], v[lane]), 0.0);
                     1.0 - s.opacity
                 } else {
@@ -1138,12 +1139,12 @@ mod tests {
         assert_eq!(material_shadow(&m(1.0, None), &textures), 0.0);
         assert_eq!(material_shadow(&m(0.25, None), &textures), 0.75);
         assert_eq!(material_shadow(&m(1.0, Some(0)), &textures), 0.0);
-        assert_eq!(material_shadow(&m(1.0, Some(1)), &textures), EVALUATE);
+        assert_eq!(material_shadow(&m(1.0, Some(1)), &textures), SHADOW_EVALUATE);
         assert!((material_shadow(&m(1.0, Some(2)), &textures) - (1.0 - 128.0 / 255.0)).abs() < 1e-6);
         assert_eq!(material_shadow(&m(0.0, Some(1)), &textures), 1.0);
         assert_eq!(material_shadow(&Material { casts_shadows: false, ..m(1.0, None) }, &textures), 1.0);
         // A missing texture is evaluated at the hit (where `surface_at` decides).
-        assert_eq!(material_shadow(&m(1.0, Some(9)), &textures), EVALUATE);
+        assert_eq!(material_shadow(&m(1.0, Some(9)), &textures), SHADOW_EVALUATE);
         let optical = Material { optical_map: Some(1), ..m(1.0, None) };
         // Texture 1's blue channel is constant (50): opacity = 50/255 in sRGB → linear.
         let tr = material_shadow(&optical, &textures);

@@ -16,7 +16,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3A;
 use hybrid_cpu::prepare::PreparedScene;
-use hybrid_scene::{Material, Texture};
+
 use wgpu::util::DeviceExt;
 
 use crate::context::{GpuContext, GpuError};
@@ -28,8 +28,9 @@ pub const BVH_WGSL: &str = include_str!("shaders/bvh.wgsl");
 /// Entries of the traversal stack in `bvh.wgsl` (`BVH_STACK`): the deepest tree it can walk.
 pub const STACK_SIZE: usize = 64;
 
-/// Shadow transparency of a triangle whose opacity varies over a texture (evaluated at the hit).
-pub const SHADOW_EVALUATE: f32 = -1.0;
+/// Shadow classes per material, shared with the CPU backend's BVH (1, a constant transparency, or
+/// [`SHADOW_EVALUATE`]: opacity varies over a texture, evaluated with the surface at the hit).
+pub use hybrid_cpu::bvh::{SHADOW_EVALUATE, material_shadow};
 
 /// `struct BvhNode` in bvh.wgsl.
 #[repr(C)]
@@ -194,30 +195,6 @@ impl TriangleBvhGpu {
     }
 }
 
-/// Shadow-ray transparency of a material, exactly as `hybrid_cpu::bvh` classifies it: 1 when it
-/// casts no shadows (or is fully transparent), its constant `1 − opacity` when no texture can
-/// change it (no maps, or maps whose relevant channel is the same in every texel of level 0),
-/// else [`SHADOW_EVALUATE`].
-pub fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
-    if !m.casts_shadows || m.opacity <= 0.0 {
-        return 1.0;
-    }
-    if !m.opacity.is_finite() {
-        return SHADOW_EVALUATE;
-    }
-    let constant = |id: Option<usize>, c: usize| -> Option<f32> {
-        let Some(id) = id else { return Some(1.0) };
-        let t = textures.get(id)?;
-        let texels = &t.levels.first()?.texels;
-        let v = texels.first()?[c];
-        texels.iter().all(|x| x[c] == v).then(|| t.texel(0, 0, 0)[c])
-    };
-    match (constant(m.diffuse_map, 3), constant(m.optical_map, 2)) {
-        (Some(a), Some(b)) => 1.0 - (m.opacity * a * b).clamp(0.0, 1.0),
-        _ => SHADOW_EVALUATE,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -273,20 +250,5 @@ fn probe() {
             }
         }
         assert!(seen.iter().all(|&k| k == 1), "every triangle in exactly one leaf");
-    }
-
-    #[test]
-    fn shadow_classes_match_the_cpu_rules() {
-        let tex = |alphas: [u8; 4]| Texture::new("t", 2, 2, alphas.map(|a| [200, 100, 50, a]).to_vec(), hybrid_scene::ColorSpace::Srgb);
-        let textures = vec![tex([255; 4]), tex([255, 255, 0, 255]), tex([128; 4])];
-        let m = |opacity: f32, diffuse_map: Option<usize>| Material { opacity, diffuse_map, ..Default::default() };
-        assert_eq!(material_shadow(&m(1.0, None), &textures), 0.0);
-        assert_eq!(material_shadow(&m(0.25, None), &textures), 0.75);
-        assert_eq!(material_shadow(&m(1.0, Some(0)), &textures), 0.0);
-        assert_eq!(material_shadow(&m(1.0, Some(1)), &textures), SHADOW_EVALUATE);
-        assert!((material_shadow(&m(1.0, Some(2)), &textures) - (1.0 - 128.0 / 255.0)).abs() < 1e-6);
-        assert_eq!(material_shadow(&m(0.0, Some(1)), &textures), 1.0);
-        assert_eq!(material_shadow(&Material { casts_shadows: false, ..m(1.0, None) }, &textures), 1.0);
-        assert_eq!(material_shadow(&m(1.0, Some(9)), &textures), SHADOW_EVALUATE);
     }
 }
