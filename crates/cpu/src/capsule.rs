@@ -448,7 +448,7 @@ impl RtCapsule for PointCloudCapsule {
             // Bands of `TILE` rows, one rayon task each (`with_max_len(1)`: ray cost is uneven,
             // KNOWN-GOOD gotcha 12), traced in `TILE`×`TILE` tiles: neighbouring rays visit the
             // same nodes, so a tile's working set stays in the cache. Each pixel's ray is the same.
-            const TILE: usize = 8;
+            const TILE: usize = 16;
             let wu = w as usize;
             out.texels
                 .par_chunks_mut(wu * TILE)
