@@ -1,17 +1,22 @@
 //! A BVH over millions of equal-radius spheres (the RT-scene's point cloud, DESIGN §5).
 //!
-//! - **Build**: binned SAH (16 bins per axis, all three axes) over the sphere centres. With one
+//! - **Build**: binned SAH (16 bins along the widest axis) over the sphere centres. With one
 //!   radius, a node's box is its centres' box grown by `r`, so the bins track centre bounds only.
 //!   The top of the tree is built in parallel with `rayon::join`; every subtree is laid out in
 //!   depth-first order and stitched by its parent, so the result does not depend on the thread
 //!   count or timing (deterministic).
-//! - **Layout** (memory): centres are stored in leaf order (12 B/sphere) with their original index
-//!   (4 B/sphere); inner nodes hold both children's boxes (56 B per inner node, about one inner
-//!   node per 2–4 spheres). [`SphereBvh::bytes`] reports the total.
-//! - **Trace**: ordered depth-first traversal (near child first, far child on a stack with its
-//!   entry distance, skipped when a closer hit has been found), exact ray–sphere test in the
-//!   perpendicular-distance form (KNOWN-GOOD gotcha 13): project the centre on the ray and compare
-//!   the squared distance of the centre from the ray with r². Ties in t go to the lower index, so
+//! - **Layout** (memory): the binary tree is collapsed into 4-wide nodes (each opens the child
+//!   of largest area until it has four), holding their children's boxes as structure of arrays
+//!   (112 B per node, about one node per 6 spheres). Centres are stored in leaf order as three
+//!   per-axis arrays (12 B/sphere) with their original index (4 B/sphere). [`SphereBvh::bytes`]
+//!   reports the total (about 34 B per sphere).
+//! - **Trace**: ordered depth-first traversal: the four children's slab tests in one SIMD pass,
+//!   the nearest entered child next, the others on a stack with their entry distances (skipped
+//!   when a closer hit has been found). A leaf's ≤ 4 spheres are tested at once with the exact
+//!   ray–sphere test in the perpendicular-distance form (KNOWN-GOOD gotcha 13), lane by lane the
+//!   same operations in the same order as the scalar [`ray_sphere`], so bit for bit its results:
+//!   project the centre on the ray and compare the squared distance of the centre from the ray
+//!   with r². Ties in t go to the lower index, so
 //!   the result equals brute force whatever the traversal order.
 
 use glam::{Vec3, Vec4};
@@ -24,7 +29,7 @@ const BINS: usize = 16;
 const PARALLEL_MIN: usize = 16 * 1024;
 /// Leaf reference flag; a leaf reference holds `start << 4 | count`.
 const LEAF: u32 = 1 << 31;
-/// Traversal stack capacity reserved up front (the build bounds the depth by 64 + log2(n)).
+/// Traversal stack capacity reserved up front (it grows past it if needed: up to 3 pushes per level).
 const STACK: usize = 96;
 
 /// A reusable traversal stack (subtree reference, entry distance).
