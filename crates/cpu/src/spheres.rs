@@ -156,6 +156,12 @@ struct Subtree {
     root: u32,
 }
 
+/// A collapsed subtree: its 4-wide nodes in depth-first order and its root reference (local).
+struct Subtree4 {
+    nodes: Vec<Node4>,
+    root: u32,
+}
+
 impl SphereBvh {
     /// Builds the BVH over spheres of one `radius` at `centers`.
     pub fn build(centers: &[Vec3], radius: f32) -> Result<Self, SphereBvhError> {
@@ -173,8 +179,7 @@ impl SphereBvh {
         let tree = if items.is_empty() { Subtree { nodes: Vec::new(), root: LEAF } } else { build_node(&mut items, 0, cb, radius, 0) };
         let (root_min, root_max) =
             if items.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (cb.min - Vec3::splat(radius), cb.max + Vec3::splat(radius)) };
-        let mut nodes = Vec::with_capacity(tree.nodes.len() / 2 + 1);
-        let root = collapse(&tree.nodes, tree.root, &mut nodes);
+        let Subtree4 { nodes, root } = collapse_par(&tree.nodes, tree.root, 0);
         drop(tree);
         let axis = |a: usize| items.iter().map(|it| it.c[a]).chain([0.0; LEAF_MAX - 1]).collect::<Vec<f32>>();
         Ok(Self {
@@ -641,6 +646,63 @@ fn collapse(nodes2: &[Node], root: u32, out: &mut Vec<Node4>) -> u32 {
     if root & LEAF != 0 {
         return root;
     }
+    let (kids, k) = open_kids(nodes2, root);
+    let idx = out.len();
+    out.push(Node4::EMPTY);
+    let mut node = Node4::EMPTY;
+    for (lane, &(r, lo, hi)) in kids[..k].iter().enumerate() {
+        node.child[lane] = collapse(nodes2, r, out);
+        for a in 0..3 {
+            node.min[a][lane] = lo[a];
+            node.max[a][lane] = hi[a];
+        }
+    }
+    out[idx] = node;
+    idx as u32
+}
+
+/// [`collapse`] with the top `COLLAPSE_PARALLEL_DEPTH` levels of 4-wide nodes in parallel: each
+/// child subtree collapsed on its own and stitched depth-first after its parent (the same nodes
+/// in the same order as the serial collapse).
+fn collapse_par(nodes2: &[Node], root: u32, depth: u32) -> Subtree4 {
+    const COLLAPSE_PARALLEL_DEPTH: u32 = 2;
+    if root & LEAF != 0 {
+        return Subtree4 { nodes: Vec::new(), root };
+    }
+    if depth >= COLLAPSE_PARALLEL_DEPTH {
+        let mut nodes = Vec::new();
+        let root = collapse(nodes2, root, &mut nodes);
+        return Subtree4 { nodes, root };
+    }
+    let (kids, k) = open_kids(nodes2, root);
+    use rayon::prelude::*;
+    let subs: Vec<Subtree4> = kids[..k].par_iter().map(|&(r, _, _)| collapse_par(nodes2, r, depth + 1)).collect();
+    let mut node = Node4::EMPTY;
+    let mut nodes = Vec::with_capacity(1 + subs.iter().map(|s| s.nodes.len()).sum::<usize>());
+    nodes.push(node);
+    for (lane, (sub, &(_, lo, hi))) in subs.into_iter().zip(&kids[..k]).enumerate() {
+        let off = nodes.len() as u32;
+        node.child[lane] = if sub.root & LEAF != 0 { sub.root } else { sub.root + off };
+        for a in 0..3 {
+            node.min[a][lane] = lo[a];
+            node.max[a][lane] = hi[a];
+        }
+        nodes.extend(sub.nodes.into_iter().map(|mut n| {
+            for c in &mut n.child {
+                if *c & LEAF == 0 {
+                    *c += off;
+                }
+            }
+            n
+        }));
+    }
+    nodes[0] = node;
+    Subtree4 { nodes, root: 0 }
+}
+
+/// The ≤ 4 children of the 4-wide node made from BVH2 node `root`: its two children, then the inner
+/// child of largest surface area opened until there are four (or only leaves are left).
+fn open_kids(nodes2: &[Node], root: u32) -> ([(u32, Vec3, Vec3); 4], usize) {
     let kids_of = |r: u32| {
         let n = &nodes2[r as usize];
         let lo = |l: usize| Vec3::new(n.x[l], n.y[l], n.z[l]);
@@ -661,18 +723,7 @@ fn collapse(nodes2: &[Node], root: u32, out: &mut Vec<Node4>) -> u32 {
         kids[k] = b;
         k += 1;
     }
-    let idx = out.len();
-    out.push(Node4::EMPTY);
-    let mut node = Node4::EMPTY;
-    for (lane, &(r, lo, hi)) in kids[..k].iter().enumerate() {
-        node.child[lane] = collapse(nodes2, r, out);
-        for a in 0..3 {
-            node.min[a][lane] = lo[a];
-            node.max[a][lane] = hi[a];
-        }
-    }
-    out[idx] = node;
-    idx as u32
+    (kids, k)
 }
 
 /// In-place partition: items for which `left` holds first; returns their count.
