@@ -2,7 +2,11 @@
 //! pack (Mrays/s), bytes per point, clipped vs unclipped against a wall, and a 10M-point cloud.
 //!
 //! `cargo bench -p hybrid-cpu --bench capsule` (criterion measurements, then a one-shot report).
-//! `CAPSULE_BENCH_10M=0` skips the 10-million-point part.
+//! `CAPSULE_BENCH_10M=0` skips the 10-million-point part. `CAPSULE_BENCH_RUNS=n` sets the one-shot
+//! report's runs per measurement (default 5; 3 for 10M). Give criterion a filter that matches
+//! nothing (`-- nomatch`) to get the one-shot report alone. The report also gives CPU-seconds
+//! (all threads) per build and per frame, fairer on a loaded machine than wall time, and an FNV-1a
+//! checksum of each frame's texels: it must not change when only speed work was done.
 
 use std::hint::black_box;
 use std::path::Path;
@@ -151,6 +155,11 @@ fn cpu_seconds() -> f64 {
     if f.len() > 12 { (f[10] + f[11]) / 100.0 } else { 0.0 }
 }
 
+/// FNV-1a over the frame's texels.
+fn checksum(frame: &PackedRtFrame) -> u64 {
+    frame.texels.iter().flatten().fold(0xcbf2_9ce4_8422_2325u64, |h, &v| (h ^ v as u64).wrapping_mul(0x100_0000_01b3))
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -160,6 +169,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn report(label: &str, points: Vec<Vec3>, runs: usize) {
     let n = points.len();
     let camera = framing_camera(&points);
+    let cpu_b = cpu_seconds();
     let build = median(
         (0..runs)
             .map(|_| {
@@ -169,6 +179,7 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
             })
             .collect(),
     );
+    let build_cpu_ms = (cpu_seconds() - cpu_b) / runs as f64 * 1e3;
     let mut capsule = capsule_for(points);
     let bytes = capsule.bytes();
     let mut frame = PackedRtFrame::new(W, H);
@@ -176,12 +187,12 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
     let mut trace = |clip: Option<&[f32]>| {
         let req = CapsuleRequest { camera, width: W, height: H, clip_depth: clip };
         let stats: Vec<_> = (0..runs).map(|_| capsule.render(&req, &mut frame)).collect();
-        (median(stats.iter().map(|s| s.trace_ms).collect()), stats[0].hits)
+        (median(stats.iter().map(|s| s.trace_ms).collect()), stats[0].hits, checksum(&frame))
     };
     let cpu0 = cpu_seconds();
-    let (full_ms, hits) = trace(None);
+    let (full_ms, hits, full_sum) = trace(None);
     let cpu_per_frame = (cpu_seconds() - cpu0) / runs as f64;
-    let (clip_ms, clip_hits) = trace(Some(&wall));
+    let (clip_ms, clip_hits, clip_sum) = trace(Some(&wall));
     let rays = (W * H) as f64;
     // Block P alone (it is fused into the trace): encode one frame's worth of hits.
     let raygen = RayGen::new(&camera, W, H);
@@ -196,7 +207,8 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
     println!(
         "{label}: {n} points, {threads} threads | build {build:.0} ms | trace+pack 1920x1080 {full_ms:.1} ms = {:.2} Mrays/s ({hits} hits) | \
          clipped by wall {clip_ms:.1} ms = {:.2} Mrays/s ({clip_hits} hits), speed-up {:.2}x | ray gen + block D + P alone (1 thread) {pack_ms:.1} ms | \
-         memory {:.1} MB = {:.1} B/point | unclipped: {:.2} Mrays per CPU-second",
+         memory {:.1} MB = {:.1} B/point | unclipped: {:.2} Mrays per CPU-second | build {build_cpu_ms:.0} CPU-ms | \
+         checksums {full_sum:016x} {clip_sum:016x}",
         rays / full_ms / 1e3,
         rays / clip_ms / 1e3,
         full_ms / clip_ms,
@@ -209,7 +221,8 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
 
 fn one_shot() {
     let points = scan();
-    report("tree scan 1M", points.clone(), 5);
+    let runs = std::env::var("CAPSULE_BENCH_RUNS").ok().and_then(|v| v.parse().ok()).unwrap_or(5usize).max(1);
+    report("tree scan 1M", points.clone(), runs);
     if std::env::var("CAPSULE_BENCH_10M").is_ok_and(|v| v == "0") {
         return;
     }
@@ -220,7 +233,7 @@ fn one_shot() {
         many.extend(points.iter().map(|p| *p + off));
     }
     drop(points);
-    report("tree scan x10", many, 3);
+    report("tree scan x10", many, runs.min(3));
 }
 
 criterion_group!(benches, bench);

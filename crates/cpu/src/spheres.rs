@@ -1,20 +1,25 @@
 //! A BVH over millions of equal-radius spheres (the RT-scene's point cloud, DESIGN §5).
 //!
-//! - **Build**: binned SAH (16 bins per axis, all three axes) over the sphere centres. With one
+//! - **Build**: binned SAH (16 bins along the widest axis) over the sphere centres. With one
 //!   radius, a node's box is its centres' box grown by `r`, so the bins track centre bounds only.
 //!   The top of the tree is built in parallel with `rayon::join`; every subtree is laid out in
 //!   depth-first order and stitched by its parent, so the result does not depend on the thread
 //!   count or timing (deterministic).
-//! - **Layout** (memory): centres are stored in leaf order (12 B/sphere) with their original index
-//!   (4 B/sphere); inner nodes hold both children's boxes (56 B per inner node, about one inner
-//!   node per 2–4 spheres). [`SphereBvh::bytes`] reports the total.
-//! - **Trace**: ordered depth-first traversal (near child first, far child on a stack with its
-//!   entry distance, skipped when a closer hit has been found), exact ray–sphere test in the
-//!   perpendicular-distance form (KNOWN-GOOD gotcha 13): project the centre on the ray and compare
-//!   the squared distance of the centre from the ray with r². Ties in t go to the lower index, so
+//! - **Layout** (memory): the binary tree is collapsed into 4-wide nodes (each opens the child
+//!   of largest area until it has four), holding their children's boxes as structure of arrays
+//!   (112 B per node, about one node per 6 spheres). Centres are stored in leaf order as three
+//!   per-axis arrays (12 B/sphere) with their original index (4 B/sphere). [`SphereBvh::bytes`]
+//!   reports the total (about 34 B per sphere).
+//! - **Trace**: ordered depth-first traversal: the four children's slab tests in one SIMD pass,
+//!   the nearest entered child next, the others on a stack with their entry distances (skipped
+//!   when a closer hit has been found). A leaf's ≤ 4 spheres are tested at once with the exact
+//!   ray–sphere test in the perpendicular-distance form (KNOWN-GOOD gotcha 13), lane by lane the
+//!   same operations in the same order as the scalar [`ray_sphere`], so bit for bit its results:
+//!   project the centre on the ray and compare the squared distance of the centre from the ray
+//!   with r². Ties in t go to the lower index, so
 //!   the result equals brute force whatever the traversal order.
 
-use glam::{Vec3, Vec4, Vec4Swizzles};
+use glam::{Vec3, Vec4};
 
 /// Spheres per leaf at most.
 const LEAF_MAX: usize = 4;
@@ -24,7 +29,7 @@ const BINS: usize = 16;
 const PARALLEL_MIN: usize = 16 * 1024;
 /// Leaf reference flag; a leaf reference holds `start << 4 | count`.
 const LEAF: u32 = 1 << 31;
-/// Traversal stack capacity reserved up front (the build bounds the depth by 64 + log2(n)).
+/// Traversal stack capacity reserved up front (it grows past it if needed: up to 3 pushes per level).
 const STACK: usize = 96;
 
 /// A reusable traversal stack (subtree reference, entry distance).
@@ -50,15 +55,32 @@ struct Node {
     child: [u32; 2],
 }
 
+/// One 4-wide node: its ≤ 4 children's boxes, one 4-lane vector per bound (structure of arrays, so
+/// the four slab tests are a few SIMD operations), and their references (an inner-node index, or
+/// `LEAF | start << 4 | count`). Unused slots have an empty box (+∞ … −∞), which no ray enters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Node4 {
+    min: [Vec4; 3],
+    max: [Vec4; 3],
+    child: [u32; 4],
+}
+
+impl Node4 {
+    const EMPTY: Self = Self { min: [Vec4::INFINITY; 3], max: [Vec4::NEG_INFINITY; 3], child: [LEAF; 4] };
+}
+
 /// A sphere BVH. Directions passed to [`SphereBvh::closest_hit`] need not be unit length.
 #[derive(Debug, Clone)]
 pub struct SphereBvh {
     radius: f32,
-    /// Sphere centres in leaf order.
-    centers: Vec<[f32; 3]>,
+    /// Sphere centres in leaf order, one array per axis (structure of arrays, so a leaf's ≤ 4
+    /// spheres are tested as one 4-lane vector), each padded by `LEAF_MAX - 1` zeros.
+    xs: Vec<f32>,
+    ys: Vec<f32>,
+    zs: Vec<f32>,
     /// Original index (into the `centers` given to `build`) of each leaf-order sphere.
     indices: Vec<u32>,
-    nodes: Vec<Node>,
+    nodes: Vec<Node4>,
     /// The root reference (inner node 0, or a leaf when there are ≤ `LEAF_MAX` spheres).
     root: u32,
     root_min: Vec3,
@@ -134,6 +156,12 @@ struct Subtree {
     root: u32,
 }
 
+/// A collapsed subtree: its 4-wide nodes in depth-first order and its root reference (local).
+struct Subtree4 {
+    nodes: Vec<Node4>,
+    root: u32,
+}
+
 impl SphereBvh {
     /// Builds the BVH over spheres of one `radius` at `centers`.
     pub fn build(centers: &[Vec3], radius: f32) -> Result<Self, SphereBvhError> {
@@ -151,37 +179,45 @@ impl SphereBvh {
         let tree = if items.is_empty() { Subtree { nodes: Vec::new(), root: LEAF } } else { build_node(&mut items, 0, cb, radius, 0) };
         let (root_min, root_max) =
             if items.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (cb.min - Vec3::splat(radius), cb.max + Vec3::splat(radius)) };
+        let Subtree4 { nodes, root } = collapse_par(&tree.nodes, tree.root, 0);
+        drop(tree);
+        let axis = |a: usize| items.iter().map(|it| it.c[a]).chain([0.0; LEAF_MAX - 1]).collect::<Vec<f32>>();
         Ok(Self {
             radius,
-            centers: items.iter().map(|it| it.c).collect(),
+            xs: axis(0),
+            ys: axis(1),
+            zs: axis(2),
             indices: items.iter().map(|it| it.index).collect(),
-            nodes: tree.nodes,
-            root: tree.root,
+            nodes,
+            root,
             root_min,
             root_max,
         })
     }
 
     pub fn len(&self) -> usize {
-        self.centers.len()
+        self.indices.len()
     }
     pub fn is_empty(&self) -> bool {
-        self.centers.is_empty()
+        self.indices.is_empty()
     }
     pub fn radius(&self) -> f32 {
         self.radius
     }
-    /// Inner nodes.
+    /// Inner nodes (4-wide).
     pub fn node_count(&self) -> usize {
         self.nodes.len()
     }
     /// Heap bytes held: centres, original indices and nodes.
     pub fn bytes(&self) -> usize {
-        self.centers.len() * size_of::<[f32; 3]>() + self.indices.len() * size_of::<u32>() + self.nodes.len() * size_of::<Node>()
+        (self.xs.len() + self.ys.len() + self.zs.len()) * size_of::<f32>()
+            + self.indices.len() * size_of::<u32>()
+            + self.nodes.len() * size_of::<Node4>()
     }
     /// The centre of the sphere in leaf-order slot `slot`.
     pub fn center_of_slot(&self, slot: u32) -> Vec3 {
-        Vec3::from(self.centers[slot as usize])
+        let i = slot as usize;
+        Vec3::new(self.xs[i], self.ys[i], self.zs[i])
     }
 
     /// Bounds of all spheres (zero box when empty).
@@ -209,7 +245,7 @@ impl SphereBvh {
 
     /// As [`SphereBvh::closest_hit_slot`], reusing `stack` (one per thread saves its set-up per ray).
     pub fn closest_hit_slot_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
-        if self.centers.is_empty() {
+        if self.indices.is_empty() {
             return None;
         }
         let len = dir.length();
@@ -233,9 +269,14 @@ impl SphereBvh {
         loop {
             if cur & LEAF != 0 {
                 let start = ((cur & !LEAF) >> 4) as usize;
-                let count = (cur & 0xF) as usize;
-                for slot in start..start + count {
-                    if let Some(t) = ray.sphere(self.centers[slot], best_t) {
+                let count = cur & 0xF;
+                let hits = ray.spheres4(&self.xs[start..], &self.ys[start..], &self.zs[start..], best_t, count);
+                if let Some((t4, mut mask)) = hits {
+                    let t4 = t4.to_array();
+                    while mask != 0 {
+                        let lane = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let (t, slot) = (t4[lane], start + lane);
                         let idx = self.indices[slot];
                         if t < best_t || (t == best_t && idx < best) {
                             best_t = t;
@@ -246,25 +287,37 @@ impl SphereBvh {
                 }
             } else {
                 let n = &self.nodes[cur as usize];
-                let (e0, x0, e1, x1) = ray.slab2(n, best_t);
-                let h0 = e0 <= x0 && e0 <= best_t;
-                let h1 = e1 <= x1 && e1 <= best_t;
-                match (h0, h1) {
-                    (true, true) => {
-                        let (near, far, far_e) = if e0 <= e1 { (n.child[0], n.child[1], e1) } else { (n.child[1], n.child[0], e0) };
-                        stack.push((far, far_e));
-                        cur = near;
+                let (entry, mut mask) = ray.slab4(n, best_t);
+                if mask != 0 {
+                    let first = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        cur = n.child[first];
                         continue;
                     }
-                    (true, false) => {
-                        cur = n.child[0];
-                        continue;
+                    // Several children: visit the nearest now, push the others farthest first.
+                    let entry = entry.to_array();
+                    let mut order = [(0u32, 0f32); 4];
+                    order[0] = (n.child[first], entry[first]);
+                    let mut k = 1;
+                    while mask != 0 {
+                        let lane = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let item = (n.child[lane], entry[lane]);
+                        // Insertion sort by entry distance, nearest first.
+                        let mut j = k;
+                        while j > 0 && order[j - 1].1 > item.1 {
+                            order[j] = order[j - 1];
+                            j -= 1;
+                        }
+                        order[j] = item;
+                        k += 1;
                     }
-                    (false, true) => {
-                        cur = n.child[1];
-                        continue;
+                    for &o in order[1..k].iter().rev() {
+                        stack.push(o);
                     }
-                    (false, false) => {}
+                    cur = order[0].0;
+                    continue;
                 }
             }
             // Pop the next subtree that can still hold a closer hit.
@@ -340,24 +393,29 @@ impl Ray {
         Self { o, d, inv, t_min, t_max, r }
     }
 
-    /// Both children's slab tests at once: (entry, exit) of the left box, then of the right one,
-    /// clipped to `[t_min, limit]` and padded like [`Ray::slab`].
+    /// All four children's slab tests at once: the padded entry distances (as [`Ray::slab`]) and
+    /// the bit mask of the children entered within `[t_min, limit]`.
     #[inline]
-    fn slab2(&self, n: &Node, limit: f32) -> (f32, f32, f32, f32) {
-        // Lanes (min l, min r, max l, max r) → t; for a negative direction the max planes are
-        // entered first, so swap the halves to get (near l, near r, far l, far r).
-        let axis = |v: Vec4, o: f32, inv: f32| {
-            let t = (v - Vec4::splat(o)) * inv;
-            if inv < 0.0 { t.zwxy() } else { t }
+    fn slab4(&self, n: &Node4, limit: f32) -> (Vec4, u32) {
+        // For a negative direction the max plane is entered first.
+        let axis = |a: usize| {
+            let o = Vec4::splat(self.o[a]);
+            let inv = Vec4::splat(self.inv[a]);
+            let t0 = (n.min[a] - o) * inv;
+            let t1 = (n.max[a] - o) * inv;
+            if self.inv[a] < 0.0 { (t1, t0) } else { (t0, t1) }
         };
-        let tx = axis(n.x, self.o.x, self.inv.x);
-        let ty = axis(n.y, self.o.y, self.inv.y);
-        let tz = axis(n.z, self.o.z, self.inv.z);
-        let near = tx.max(ty).max(tz).max(Vec4::splat(self.t_min));
-        let far = tx.min(ty).min(tz).min(Vec4::splat(limit));
+        let (nx, fx) = axis(0);
+        let (ny, fy) = axis(1);
+        let (nz, fz) = axis(2);
+        let limit = Vec4::splat(limit);
+        let near = nx.max(ny).max(nz).max(Vec4::splat(self.t_min));
+        let far = fx.min(fy).min(fz).min(limit);
+        // 1e-5 relative slack covers the rounding of the box and of the slab planes. Empty slots
+        // give NaN here and fail both comparisons.
         let e = near - near.abs() * 1e-5;
         let x = far + far.abs() * 1e-5;
-        (e.x, x.z, e.y, x.w)
+        (e, (e.cmple(x) & e.cmple(limit)).bitmask())
     }
 
     /// Entry and exit parameters of the box (entry > exit: miss), clipped to `[t_min, t_max]`.
@@ -374,9 +432,29 @@ impl Ray {
         (e - e.abs() * 1e-5, x + x.abs() * 1e-5)
     }
 
+    /// [`ray_sphere`] on the `count` (≤ 4) spheres whose centres start these slices (each holds at
+    /// least 4 values), as 4 lanes with exactly the scalar operations in the same order, so the
+    /// results are bit for bit those of [`ray_sphere`]: each lane's `t` and the mask of the lanes
+    /// hit within `[t_min, t_max]`.
     #[inline]
-    fn sphere(&self, c: [f32; 3], t_max: f32) -> Option<f32> {
-        ray_sphere(self.o, self.d, Vec3::from(c), self.r, self.t_min, t_max)
+    fn spheres4(&self, xs: &[f32], ys: &[f32], zs: &[f32], t_max: f32, count: u32) -> Option<(Vec4, u32)> {
+        let (ox, oy, oz) = (Vec4::from_slice(xs) - self.o.x, Vec4::from_slice(ys) - self.o.y, Vec4::from_slice(zs) - self.o.z);
+        let (dx, dy, dz) = (Vec4::splat(self.d.x), Vec4::splat(self.d.y), Vec4::splat(self.d.z));
+        let tc = ox * dx + oy * dy + oz * dz;
+        let (px, py, pz) = (ox - tc * dx, oy - tc * dy, oz - tc * dz);
+        let p2 = px * px + py * py + pz * pz;
+        let r2 = Vec4::splat(self.r * self.r);
+        let inside = p2.cmple(r2).bitmask() & ((1u32 << count) - 1);
+        if inside == 0 {
+            return None;
+        }
+        let half = (r2 - p2).sqrt();
+        let t0 = tc - half;
+        let t1 = tc + half;
+        let t_min = Vec4::splat(self.t_min);
+        let t = Vec4::select(t0.cmpge(t_min), t0, t1);
+        let mask = inside & (t.cmpge(t_min) & t.cmple(Vec4::splat(t_max))).bitmask();
+        if mask == 0 { None } else { Some((t, mask)) }
     }
 }
 
@@ -559,6 +637,93 @@ fn append_offset(dst: &mut Vec<Node>, src: Vec<Node>, off: u32) {
         }
         n
     }));
+}
+
+/// The BVH2 subtree `root` (an index into `nodes2` or a leaf) as 4-wide nodes appended to `out`
+/// depth-first: each 4-wide node takes its BVH2 node's two children and opens the inner child of
+/// largest surface area until it has four (or only leaves are left). Returns its reference.
+fn collapse(nodes2: &[Node], root: u32, out: &mut Vec<Node4>) -> u32 {
+    if root & LEAF != 0 {
+        return root;
+    }
+    let (kids, k) = open_kids(nodes2, root);
+    let idx = out.len();
+    out.push(Node4::EMPTY);
+    let mut node = Node4::EMPTY;
+    for (lane, &(r, lo, hi)) in kids[..k].iter().enumerate() {
+        node.child[lane] = collapse(nodes2, r, out);
+        for a in 0..3 {
+            node.min[a][lane] = lo[a];
+            node.max[a][lane] = hi[a];
+        }
+    }
+    out[idx] = node;
+    idx as u32
+}
+
+/// [`collapse`] with the top `COLLAPSE_PARALLEL_DEPTH` levels of 4-wide nodes in parallel: each
+/// child subtree collapsed on its own and stitched depth-first after its parent (the same nodes
+/// in the same order as the serial collapse).
+fn collapse_par(nodes2: &[Node], root: u32, depth: u32) -> Subtree4 {
+    const COLLAPSE_PARALLEL_DEPTH: u32 = 2;
+    if root & LEAF != 0 {
+        return Subtree4 { nodes: Vec::new(), root };
+    }
+    if depth >= COLLAPSE_PARALLEL_DEPTH {
+        let mut nodes = Vec::new();
+        let root = collapse(nodes2, root, &mut nodes);
+        return Subtree4 { nodes, root };
+    }
+    let (kids, k) = open_kids(nodes2, root);
+    use rayon::prelude::*;
+    let subs: Vec<Subtree4> = kids[..k].par_iter().map(|&(r, _, _)| collapse_par(nodes2, r, depth + 1)).collect();
+    let mut node = Node4::EMPTY;
+    let mut nodes = Vec::with_capacity(1 + subs.iter().map(|s| s.nodes.len()).sum::<usize>());
+    nodes.push(node);
+    for (lane, (sub, &(_, lo, hi))) in subs.into_iter().zip(&kids[..k]).enumerate() {
+        let off = nodes.len() as u32;
+        node.child[lane] = if sub.root & LEAF != 0 { sub.root } else { sub.root + off };
+        for a in 0..3 {
+            node.min[a][lane] = lo[a];
+            node.max[a][lane] = hi[a];
+        }
+        nodes.extend(sub.nodes.into_iter().map(|mut n| {
+            for c in &mut n.child {
+                if *c & LEAF == 0 {
+                    *c += off;
+                }
+            }
+            n
+        }));
+    }
+    nodes[0] = node;
+    Subtree4 { nodes, root: 0 }
+}
+
+/// The ≤ 4 children of the 4-wide node made from BVH2 node `root`: its two children, then the inner
+/// child of largest surface area opened until there are four (or only leaves are left).
+fn open_kids(nodes2: &[Node], root: u32) -> ([(u32, Vec3, Vec3); 4], usize) {
+    let kids_of = |r: u32| {
+        let n = &nodes2[r as usize];
+        let lo = |l: usize| Vec3::new(n.x[l], n.y[l], n.z[l]);
+        [(n.child[0], lo(0), lo(2)), (n.child[1], lo(1), lo(3))]
+    };
+    let mut kids = [(LEAF, Vec3::ZERO, Vec3::ZERO); 4];
+    kids[..2].copy_from_slice(&kids_of(root));
+    let mut k = 2;
+    while k < 4 {
+        let area = |(_, lo, hi): (u32, Vec3, Vec3)| {
+            let e = hi - lo;
+            e.x * e.y + e.y * e.z + e.z * e.x
+        };
+        let open = (0..k).filter(|&i| kids[i].0 & LEAF == 0).max_by(|&a, &b| area(kids[a]).total_cmp(&area(kids[b])));
+        let Some(i) = open else { break };
+        let [a, b] = kids_of(kids[i].0);
+        kids[i] = a;
+        kids[k] = b;
+        k += 1;
+    }
+    (kids, k)
 }
 
 /// In-place partition: items for which `left` holds first; returns their count.
