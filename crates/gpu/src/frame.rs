@@ -177,11 +177,12 @@ impl<'s> GpuRenderer<'s> {
         if mode == Mode::Raster {
             clear_trace_outputs(&mut enc, targets);
         } else {
-            let trace = match &self.trace_without_spheres {
-                Some(t) if !self.spheres_in_trace => t,
-                _ => &self.trace,
-            };
-            trace.encode(&mut enc, &self.gpu_scene, targets, &mut self.timer);
+            chosen_trace(&self.trace, &self.trace_without_spheres, self.spheres_in_trace).encode(
+                &mut enc,
+                &self.gpu_scene,
+                targets,
+                &mut self.timer,
+            );
         }
         on_stage("blend");
         self.blend.encode(&mut enc, targets, &mut self.timer);
@@ -193,7 +194,11 @@ impl<'s> GpuRenderer<'s> {
         let wall = start.elapsed().as_secs_f64() * 1e3;
 
         let gpu_timings = self.timer.read(&self.ctx)?;
-        let mut rays = if mode == Mode::Raster { RayCounts::default() } else { self.trace_passes().read_ray_counts(&self.ctx)? };
+        let mut rays = if mode == Mode::Raster {
+            RayCounts::default()
+        } else {
+            chosen_trace(&self.trace, &self.trace_without_spheres, self.spheres_in_trace).read_ray_counts(&self.ctx)?
+        };
         if mode == Mode::RtOnly {
             rays.primary = w as u64 * h as u64;
         }
@@ -251,14 +256,6 @@ impl<'s> GpuRenderer<'s> {
         }
     }
 
-    /// The trace stage with or without the point-cloud spheres (`spheres_in_trace`).
-    fn trace_passes(&self) -> &TracePasses {
-        match &self.trace_without_spheres {
-            Some(t) if !self.spheres_in_trace => t,
-            _ => &self.trace,
-        }
-    }
-
     /// Stage 2: read A per object back, run the shared heuristic (modes hybrid and all), and
     /// record the mask pass. rt-only masks every covered pixel; raster masks nothing.
     fn heuristic_stage(
@@ -288,6 +285,15 @@ impl<'s> GpuRenderer<'s> {
                 Ok(Some(selection.report))
             }
         }
+    }
+}
+
+/// The trace stage with the point-cloud spheres, or without them (`spheres_in_trace` off, on
+/// scenes that have them).
+fn chosen_trace<'t>(with_spheres: &'t TracePasses, without: &'t Option<TracePasses>, spheres_in_trace: bool) -> &'t TracePasses {
+    match without {
+        Some(t) if !spheres_in_trace => t,
+        _ => with_spheres,
     }
 }
 
