@@ -89,9 +89,22 @@ impl GpuContext {
         if choice == AdapterChoice::HardwareOnly {
             adapters.retain(|a| !matches!(a.get_info().device_type, wgpu::DeviceType::Cpu | wgpu::DeviceType::Other));
         }
-        // Compute shaders and storage textures are required: GL adapters without them are skipped.
-        adapters.retain(|a| a.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS));
-        let adapter = adapters.into_iter().next().ok_or(GpuError::NoAdapter)?;
+        // Adapters that cannot run every pass are skipped (with the reason, if none is left).
+        let mut refused = Vec::new();
+        adapters.retain(|a| match missing_capability(a) {
+            None => true,
+            Some(why) => {
+                refused.push(format!("{}: {why}", a.get_info().name));
+                false
+            }
+        });
+        let Some(adapter) = adapters.into_iter().next() else {
+            return Err(if refused.is_empty() {
+                GpuError::NoAdapter
+            } else {
+                GpuError::Unsupported { adapter: "every adapter found".into(), why: refused.join("; ") }
+            });
+        };
         let info = adapter.get_info();
         let summary = AdapterSummary {
             name: info.name.clone(),
@@ -120,6 +133,23 @@ impl GpuContext {
     pub fn max_storage_binding(&self) -> u64 {
         self.device.limits().max_storage_buffer_binding_size
     }
+}
+
+/// What the passes need beyond wgpu's defaults: compute shaders, the G-buffer's 8 colour targets
+/// (68 bytes per pixel), 16 storage buffers per stage (the trace passes bind 15), 3 bind groups.
+/// `None` when the adapter has all of it, else what it lacks.
+fn missing_capability(adapter: &wgpu::Adapter) -> Option<String> {
+    if !adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS) {
+        return Some("no compute shaders".into());
+    }
+    let l = adapter.limits();
+    let needs = [
+        ("colour attachments", l.max_color_attachments, 8),
+        ("colour attachment bytes per sample", l.max_color_attachment_bytes_per_sample, 68),
+        ("storage buffers per shader stage", l.max_storage_buffers_per_shader_stage, 16),
+        ("bind groups", l.max_bind_groups, 3),
+    ];
+    needs.iter().find(|(_, has, need)| has < need).map(|(what, has, need)| format!("{what}: {has}, needs {need}"))
 }
 
 /// Sort key: hardware before software, Vulkan/Metal/DX12 before GL.

@@ -62,6 +62,15 @@ impl<'s> GpuRenderer<'s> {
     /// Uploads `scene` once: vertices, materials, textures, lights, the triangle BVH and the
     /// point clouds' sphere BVH, and builds every stage's pipeline.
     pub fn new(ctx: Arc<GpuContext>, scene: &'s Scene) -> Result<Self, GpuError> {
+        // wgpu reports invalid use and exhausted memory asynchronously (by default with a panic):
+        // capture both while the scene is uploaded and the pipelines built, and return them.
+        let scope = ErrorScope::push(&ctx.device);
+        let renderer = Self::build(ctx.clone(), scene)?;
+        scope.pop(&ctx)?;
+        Ok(renderer)
+    }
+
+    fn build(ctx: Arc<GpuContext>, scene: &'s Scene) -> Result<Self, GpuError> {
         let start = Instant::now();
         let prepared = PreparedScene::new(scene);
         let gpu_scene = SceneGpu::new(&ctx, &prepared)?;
@@ -106,11 +115,12 @@ impl<'s> GpuRenderer<'s> {
     /// `on_stage` is told each stage's name as it is recorded.
     pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Result<Frame, GpuError> {
         let (w, h) = (settings.width, settings.height);
+        let scope = ErrorScope::push(&self.ctx.device);
         let targets = match self.targets.take() {
             Some(t) if t.width == w && t.height == h => t,
             _ => FrameTargets::new(&self.ctx.device, w, h),
         };
-        let result = self.render_into(&targets, camera, settings, on_stage);
+        let result = self.render_into(&targets, camera, settings, on_stage).and_then(|r| scope.pop(&self.ctx).map(|()| r));
         let frame = result.and_then(|(report_parts, wall)| {
             let gbuffer = readback::read_gbuffer(&self.ctx, &targets)?;
             let buffers = readback::read_frame_buffers(&self.ctx, &targets)?;
@@ -119,7 +129,10 @@ impl<'s> GpuRenderer<'s> {
             report.timings_ms.frame = wall;
             Ok(Frame { settings, gbuffer, buffers, rt_packed, report })
         });
-        self.targets = Some(targets);
+        // Targets the device refused (too large) are not kept for the next frame.
+        if frame.is_ok() {
+            self.targets = Some(targets);
+        }
         frame
     }
 
@@ -284,6 +297,31 @@ impl<'s> GpuRenderer<'s> {
                 self.heuristic_passes.encode_mask(ctx, enc, targets, MaskSelection::Objects(&selection.selected), &mut self.timer);
                 Ok(Some(selection.report))
             }
+        }
+    }
+}
+
+/// Validation and out-of-memory errors of the device, captured instead of wgpu's default panic.
+struct ErrorScope {
+    out_of_memory: wgpu::ErrorScopeGuard,
+    validation: wgpu::ErrorScopeGuard,
+}
+
+impl ErrorScope {
+    fn push(device: &wgpu::Device) -> Self {
+        let out_of_memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        Self { out_of_memory, validation }
+    }
+
+    /// The first error captured since `push`, as a `GpuError` naming the adapter.
+    fn pop(self, ctx: &GpuContext) -> Result<(), GpuError> {
+        let validation = pollster::block_on(self.validation.pop());
+        let out_of_memory = pollster::block_on(self.out_of_memory.pop());
+        match (out_of_memory, validation) {
+            (Some(e), _) => Err(GpuError::TooLarge { adapter: ctx.summary.name.clone(), why: e.to_string() }),
+            (None, Some(e)) => Err(GpuError::Unsupported { adapter: ctx.summary.name.clone(), why: e.to_string() }),
+            (None, None) => Ok(()),
         }
     }
 }

@@ -139,3 +139,18 @@ fn tree_merge_options_match_the_cpu() {
     eprintln!("capsule hits: clipped {} vs unclipped {}", hits[0], hits[2]);
     assert!(hits[0] < hits[2], "clipping removed no capsule hits ({} vs {})", hits[0], hits[2]);
 }
+
+/// What the device refuses (here: an image wider than its largest texture) comes back as an
+/// error naming the adapter, not as wgpu's default panic, and the renderer keeps working.
+#[test]
+fn device_errors_are_returned_not_panicked() {
+    let ctx = context();
+    let scene = demo_scene();
+    let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap();
+    let too_wide = ctx.device.limits().max_texture_dimension_2d + 1;
+    let settings = FrameSettings { width: too_wide, height: 2, mode: Mode::Hybrid };
+    let err = gpu.render(&scene.camera, settings, &mut |_| {}).expect_err("a frame wider than the device allows");
+    assert!(err.to_string().contains(&ctx.summary.name), "{err}");
+    let ok = FrameSettings { width: 32, height: 18, mode: Mode::Hybrid };
+    assert!(gpu.render(&scene.camera, ok, &mut |_| {}).is_ok());
+}
