@@ -17,8 +17,6 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3A;
 use hybrid_cpu::prepare::PreparedScene;
 
-use wgpu::util::DeviceExt;
-
 use crate::context::{GpuContext, GpuError};
 use crate::scene::{GpuTriangle, GpuVertex, SceneGpu};
 
@@ -146,26 +144,9 @@ impl TriangleBvhGpu {
                 why: format!("the triangle BVH is {} levels deep, the GPU traversal stack holds {STACK_SIZE}", flat.depth),
             });
         }
-        let nodes_bytes: &[u8] = bytemuck::cast_slice(&flat.nodes);
-        let tris_bytes: &[u8] = bytemuck::cast_slice(&flat.tris);
-        for (label, len) in [("BVH nodes", nodes_bytes.len()), ("BVH triangles", tris_bytes.len())] {
-            if len as u64 > ctx.max_storage_binding() {
-                return Err(GpuError::TooLarge {
-                    adapter: ctx.summary.name.clone(),
-                    why: format!("{label} need {} MiB, the device binds at most {} MiB", len >> 20, ctx.max_storage_binding() >> 20),
-                });
-            }
-        }
-        let buffer = |label: &str, contents: &[u8]| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
         Ok(Self {
-            nodes: buffer("bvh.nodes", nodes_bytes),
-            tris: buffer("bvh.tris", tris_bytes),
+            nodes: ctx.storage_buffer("BVH nodes", bytemuck::cast_slice(&flat.nodes))?,
+            tris: ctx.storage_buffer("BVH triangles", bytemuck::cast_slice(&flat.tris))?,
             node_count: flat.nodes.len() as u32,
             triangle_count: scene.triangle_count,
             depth: flat.depth,

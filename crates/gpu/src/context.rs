@@ -129,6 +129,25 @@ impl GpuContext {
         self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))
     }
 
+    /// A storage buffer holding `bytes` (an empty array gets 128 zero bytes: one element of the
+    /// largest struct the shaders read), or `TooLarge` when it exceeds the device's binding limit.
+    pub fn storage_buffer(&self, label: &str, bytes: &[u8]) -> Result<wgpu::Buffer, GpuError> {
+        use wgpu::util::DeviceExt;
+        if bytes.len() as u64 > self.max_storage_binding() {
+            return Err(GpuError::TooLarge {
+                adapter: self.summary.name.clone(),
+                why: format!("{label} needs {} MiB, the device binds at most {} MiB", bytes.len() >> 20, self.max_storage_binding() >> 20),
+            });
+        }
+        let zeros = [0u8; 128];
+        let contents = if bytes.is_empty() { &zeros[..] } else { bytes };
+        Ok(self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        }))
+    }
+
     /// The largest storage buffer one binding may hold on this device.
     pub fn max_storage_binding(&self) -> u64 {
         self.device.limits().max_storage_buffer_binding_size

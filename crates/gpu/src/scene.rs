@@ -7,7 +7,6 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use hybrid_cpu::prepare::PreparedScene;
 use hybrid_scene::{Camera, ColorSpace, Environment, Lights, Skybox};
-use wgpu::util::DeviceExt;
 
 use crate::context::{GpuContext, GpuError};
 
@@ -294,34 +293,16 @@ impl SceneGpu {
         let lights = gpu_lights(&scene.lights);
         let light_count = lights.len() as u32;
 
-        let storage = |label: &str, bytes: &[u8]| -> Result<wgpu::Buffer, GpuError> {
-            if bytes.len() as u64 > ctx.max_storage_binding() {
-                return Err(GpuError::TooLarge {
-                    adapter: ctx.summary.name.clone(),
-                    why: format!(
-                        "{label} needs {} MiB, the device binds at most {} MiB",
-                        bytes.len() >> 20,
-                        ctx.max_storage_binding() >> 20
-                    ),
-                });
-            }
-            // Empty arrays still need a buffer: bind one element of zeros.
-            let zeros = [0u8; 128];
-            let contents = if bytes.is_empty() { &zeros[..] } else { bytes };
-            Ok(device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            }))
-        };
-        let vertices_buf = storage("scene.vertices", bytemuck::cast_slice(&vertices))?;
-        let triangles_buf = storage("scene.triangles", bytemuck::cast_slice(&triangles))?;
-        let meshes_buf = storage("scene.meshes", bytemuck::cast_slice(&meshes))?;
-        let materials_buf = storage("scene.materials", bytemuck::cast_slice(&materials))?;
-        let dir_buf = storage("scene.tex_dir", bytemuck::cast_slice(&dir))?;
-        let texels =
-            [storage("scene.texels0", bytemuck::cast_slice(&pages[0]))?, storage("scene.texels1", bytemuck::cast_slice(&pages[1]))?];
-        let lights_buf = storage("scene.lights", bytemuck::cast_slice(&lights))?;
+        let vertices_buf = ctx.storage_buffer("scene.vertices", bytemuck::cast_slice(&vertices))?;
+        let triangles_buf = ctx.storage_buffer("scene.triangles", bytemuck::cast_slice(&triangles))?;
+        let meshes_buf = ctx.storage_buffer("scene.meshes", bytemuck::cast_slice(&meshes))?;
+        let materials_buf = ctx.storage_buffer("scene.materials", bytemuck::cast_slice(&materials))?;
+        let dir_buf = ctx.storage_buffer("scene.tex_dir", bytemuck::cast_slice(&dir))?;
+        let texels = [
+            ctx.storage_buffer("scene.texels0", bytemuck::cast_slice(&pages[0]))?,
+            ctx.storage_buffer("scene.texels1", bytemuck::cast_slice(&pages[1]))?,
+        ];
+        let lights_buf = ctx.storage_buffer("scene.lights", bytemuck::cast_slice(&lights))?;
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("scene.frame_uniforms"),
             size: std::mem::size_of::<FrameUniforms>() as u64,

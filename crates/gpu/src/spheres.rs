@@ -211,30 +211,10 @@ impl SpheresGpu {
     /// Uploads host-side sphere data (`SphereData::build`).
     pub fn upload(ctx: &GpuContext, data: &SphereData, build_ms: f64) -> Result<Self, GpuError> {
         let device = &ctx.device;
-        let storage = |label: &str, bytes: &[u8]| -> Result<wgpu::Buffer, GpuError> {
-            if bytes.len() as u64 > ctx.max_storage_binding() {
-                return Err(GpuError::TooLarge {
-                    adapter: ctx.summary.name.clone(),
-                    why: format!(
-                        "{label} needs {} MiB, the device binds at most {} MiB",
-                        bytes.len() >> 20,
-                        ctx.max_storage_binding() >> 20
-                    ),
-                });
-            }
-            // Empty arrays still need a buffer: one element of zeros.
-            let zeros = [0u8; 32];
-            let contents = if bytes.is_empty() { &zeros[..] } else { bytes };
-            Ok(device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            }))
-        };
-        let nodes = storage("spheres.nodes", bytemuck::cast_slice(&data.nodes))?;
-        let spheres = storage("spheres.spheres", bytemuck::cast_slice(&data.spheres))?;
-        let ids = storage("spheres.ids", bytemuck::cast_slice(&data.ids))?;
-        let clouds = storage("spheres.clouds", bytemuck::cast_slice(&data.clouds))?;
+        let nodes = ctx.storage_buffer("spheres.nodes", bytemuck::cast_slice(&data.nodes))?;
+        let spheres = ctx.storage_buffer("spheres.spheres", bytemuck::cast_slice(&data.spheres))?;
+        let ids = ctx.storage_buffer("spheres.ids", bytemuck::cast_slice(&data.ids))?;
+        let clouds = ctx.storage_buffer("spheres.clouds", bytemuck::cast_slice(&data.clouds))?;
         let info_value =
             GpuSphereInfo { count: data.spheres.len() as u32, nodes: data.nodes.len() as u32, clouds: data.clouds.len() as u32, _pad: 0 };
         let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
