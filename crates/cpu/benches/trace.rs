@@ -26,7 +26,7 @@ use glam::{Vec2, Vec3};
 use hybrid_core::GBuffer;
 use hybrid_core::shading::{local_lighting, reflect};
 use hybrid_cpu::PreparedScene;
-use hybrid_cpu::bvh::SceneBvh;
+use hybrid_cpu::bvh::{SceneBvh, ShadowCache};
 use hybrid_cpu::trace::{rt_only_gbuffer, trace};
 use hybrid_scene::{Camera, Lights, Material, Mesh, Object, ObjectSource, PointLight, Projection, Scene, Transform};
 use rayon::prelude::*;
@@ -298,6 +298,27 @@ fn cpu_time_report() {
             "rays",
             measure(&one, || {
                 std::hint::black_box(shadow());
+            }),
+        );
+        let shadow_cached = || {
+            r.shadow
+                .par_chunks(256)
+                .with_max_len(1)
+                .map(|c| {
+                    let mut cache = ShadowCache::default();
+                    c.iter().map(|&(o, d, t)| bvh.any_hit_attenuation_cached(&prepared, o, d, t, &mut cache)).sum::<f32>()
+                })
+                .sum::<f32>()
+        };
+        // Both give the same attenuation for every ray.
+        assert_eq!(shadow().to_bits(), shadow_cached().to_bits(), "{name}: the shadow cache changed a result");
+        report(
+            name,
+            "shadow rays, cache",
+            r.shadow.len(),
+            "rays",
+            measure(&one, || {
+                std::hint::black_box(shadow_cached());
             }),
         );
         let reflection = || {

@@ -138,6 +138,21 @@ impl Tri4 {
     const EMPTY: Tri4 = Tri4 { v0: [Vec4::ZERO; 3], e1: [Vec4::ZERO; 3], e2: [Vec4::ZERO; 3] };
 }
 
+/// The last opaque shadow blocker of one light, for
+/// [`SceneBvh::any_hit_attenuation_cached`]. Starts empty.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShadowCache {
+    /// Leaf reference (as in [`Node4::child`]) of the last opaque blocker; [`EMPTY_SLOT`]
+    /// when none.
+    leaf: u32,
+}
+
+impl Default for ShadowCache {
+    fn default() -> Self {
+        Self { leaf: EMPTY_SLOT }
+    }
+}
+
 /// Triangle of an unused pack lane.
 const NO_TRI: TriangleRef = TriangleRef { mesh: u32::MAX, triangle: u32::MAX };
 
@@ -535,7 +550,7 @@ impl SceneBvh {
     /// with `t_min < t < t_max`.
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
         let mut hit = false;
-        self.for_each_pack_hit(origin, dir, t_min, t_max, |_, _, _, _| {
+        self.for_each_pack_hit(origin, dir, t_min, t_max, |_, _, _, _, _| {
             hit = true;
             false
         });
@@ -547,10 +562,40 @@ impl SceneBvh {
     /// surface's transparency (1 − opacity, textures included via `surface_at`); stops at 0.
     /// Each triangle counts once; materials that cast no shadows are ignored.
     pub fn any_hit_attenuation(&self, prepared: &PreparedScene, origin: Vec3, dir: Vec3, t_max: f32) -> f32 {
+        self.any_hit_attenuation_cached(prepared, origin, dir, t_max, &mut ShadowCache::default())
+    }
+
+    /// [`any_hit_attenuation`](Self::any_hit_attenuation) with a shadow cache (Haines &
+    /// Greenberg 1986): the leaf of the last opaque blocker found through `cache` is tested
+    /// first, and a hit there ends the ray at 0 without a traversal. Neighbouring shadow rays
+    /// towards one light are usually blocked by the same triangles, so keep one cache per light
+    /// and trace a light's rays in pixel order. The result is the same as without the cache
+    /// (an opaque blocker anywhere on the segment gives 0 either way).
+    pub fn any_hit_attenuation_cached(
+        &self,
+        prepared: &PreparedScene,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        cache: &mut ShadowCache,
+    ) -> f32 {
+        // A cache from another tree only costs time: any pack of this tree hit by an opaque lane
+        // is a true blocker.
+        if cache.leaf != EMPTY_SLOT && leaf_packs(cache.leaf).end <= self.packs.len() {
+            let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
+            let range = leaf_packs(cache.leaf);
+            for (pack, &shadow) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]) {
+                let (_, _, _, hit) = intersect4(pack, &r, 0.0, t_max);
+                if hit & (shadow as u32 >> 4) != 0 {
+                    return 0.0;
+                }
+            }
+        }
         let mut att = 1.0f32;
-        self.for_each_pack_hit(origin, dir, 0.0, t_max, |slot0, mut mask, u, v| {
+        self.for_each_pack_hit(origin, dir, 0.0, t_max, |leaf, slot0, mut mask, u, v| {
             if mask >> 4 != 0 {
                 // An opaque blocker.
+                cache.leaf = leaf;
                 att = 0.0;
                 return false;
             }
@@ -574,12 +619,19 @@ impl SceneBvh {
         att.max(0.0)
     }
 
-    /// Calls `f(first slot of the pack, mask, u, v)` for every pack with triangles hit on the
+    /// Calls `f(leaf reference, first slot of the pack, mask, u, v)` for every pack with triangles hit on the
     /// segment that can block light, in no particular order, until `f` returns false. `mask`
     /// bits 0–3 are the lanes hit (triangles that cast shadows, transparency < 1); bits 4–7
     /// are set instead (bits 0–3 clear) when one of the lanes hit is opaque.
     #[inline]
-    fn for_each_pack_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, f: impl FnMut(usize, u32, [f32; 4], [f32; 4]) -> bool) {
+    fn for_each_pack_hit(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
+    ) {
         if self.nodes.is_empty() {
             return;
         }
@@ -597,7 +649,7 @@ impl SceneBvh {
         dir: Vec3,
         t_min: f32,
         t_max: f32,
-        mut f: impl FnMut(usize, u32, [f32; 4], [f32; 4]) -> bool,
+        mut f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
     ) {
         let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
         stack.clear();
@@ -624,7 +676,7 @@ impl SceneBvh {
                     if hit != 0 {
                         let opaque = hit & (shadow as u32 >> 4);
                         let mask = if opaque != 0 { opaque << 4 } else { hit };
-                        if !f((first + k) * 4, mask, u.to_array(), v.to_array()) {
+                        if !f(cur, (first + k) * 4, mask, u.to_array(), v.to_array()) {
                             return;
                         }
                     }
@@ -1025,6 +1077,44 @@ mod tests {
             assert_eq!(bvh.occluded(o, d, 0.0, t_max), blockers > 0);
         }
         assert!(multi > 50, "too few rays through several blockers: {multi}");
+    }
+
+    #[test]
+    fn shadow_cache_never_changes_the_attenuation() {
+        // Opaque, half-transparent and textured-opacity-free non-casting triangles mixed.
+        let mats = vec![
+            Material::default(),
+            Material { opacity: 0.5, ..Default::default() },
+            Material { casts_shadows: false, ..Default::default() },
+        ];
+        let scene = soup_scene(3000, 7, mats);
+        let p = PreparedScene::new(&scene);
+        let bvh = SceneBvh::build(&p);
+        let other_scene = soup_scene(50, 8, vec![Material::default()]);
+        let other_p = PreparedScene::new(&other_scene);
+        let other = SceneBvh::build(&other_p);
+        let mut rng = StdRng::seed_from_u64(9);
+        let mut cache = ShadowCache::default();
+        let (mut blocked, mut from_cache) = (0, 0);
+        for k in 0..3000 {
+            // Bundles of nearby rays towards one point (as a light's shadow rays), then a jump.
+            let (o, d) = random_ray(&mut rng);
+            let t_max = rng.random_range(2.0..20.0);
+            for j in 0..4 {
+                let o = o + Vec3::splat(j as f32 * 1e-3);
+                let plain = bvh.any_hit_attenuation(&p, o, d, t_max);
+                let had = cache;
+                let cached = bvh.any_hit_attenuation_cached(&p, o, d, t_max, &mut cache);
+                assert_eq!(plain.to_bits(), cached.to_bits(), "ray {k}.{j}");
+                blocked += (plain == 0.0) as u32;
+                from_cache += (plain == 0.0 && had == cache && had != ShadowCache::default()) as u32;
+            }
+            if k % 100 == 0 {
+                // A cache left by another tree is harmless.
+                other.any_hit_attenuation_cached(&other_p, Vec3::splat(-9.0), Vec3::ONE.normalize(), 1e9, &mut cache);
+            }
+        }
+        assert!(blocked > 1000 && from_cache > 300, "too few blocked rays to test the cache: {blocked}, {from_cache} from the cache");
     }
 
     #[test]

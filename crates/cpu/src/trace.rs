@@ -34,7 +34,7 @@ use hybrid_core::{GBuffer, Surface};
 use hybrid_scene::{Camera, Projection};
 use rayon::prelude::*;
 
-use crate::bvh::SceneBvh;
+use crate::bvh::{SceneBvh, ShadowCache};
 use crate::capsule::PointCloudCapsule;
 use crate::prepare::PreparedScene;
 
@@ -88,10 +88,11 @@ pub fn trace_with_spheres(
         .with_max_len(1)
         .map(|(c, ((s, m), r))| {
             let mut rays = RayCounts::default();
+            let mut caches = vec![ShadowCache::default(); lights(&prepared.scene.lights).count()];
             for k in 0..s.len() {
                 let i = c * CHUNK + k;
                 if gbuffer.mask[i] > 0.0 {
-                    (s[k], m[k], r[k]) = tracer.pixel(gbuffer, i, &mut rays);
+                    (s[k], m[k], r[k]) = tracer.pixel(gbuffer, i, &mut caches, &mut rays);
                 }
             }
             rays
@@ -118,8 +119,9 @@ struct Tracer<'a, 's> {
 }
 
 impl Tracer<'_, '_> {
-    /// Listing 8a for pixel `i`: (shadow, reflection, refraction).
-    fn pixel(&self, g: &GBuffer, i: usize, rays: &mut RayCounts) -> (Vec3, Vec3, Vec3) {
+    /// Listing 8a for pixel `i`: (shadow, reflection, refraction). `caches` holds one shadow
+    /// cache per light, carried from pixel to pixel.
+    fn pixel(&self, g: &GBuffer, i: usize, caches: &mut [ShadowCache], rays: &mut RayCounts) -> (Vec3, Vec3, Vec3) {
         let scene = self.prepared.scene;
         let surface = g.surface(i).filter(|s| s.normal.length_squared() > 0.0);
         let Some(s) = surface else {
@@ -137,7 +139,7 @@ impl Tracer<'_, '_> {
 
         let mut shadow = Vec3::ONE;
         let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
-        for light in lights(&scene.lights) {
+        for (light, cache) in lights(&scene.lights).zip(caches.iter_mut()) {
             if !light.casts_shadows() || unlit {
                 continue;
             }
@@ -151,7 +153,7 @@ impl Tracer<'_, '_> {
             let (dir, dist) = light.direction_from(s.position);
             rays.shadow += 1;
             let origin = self.offset(&s, dir);
-            let mut att = self.bvh.any_hit_attenuation(self.prepared, origin, dir, dist);
+            let mut att = self.bvh.any_hit_attenuation_cached(self.prepared, origin, dir, dist, cache);
             if att > 0.0 && self.spheres.is_some_and(|c| c.occluded(origin, dir, 0.0, dist)) {
                 att = 0.0;
             }
