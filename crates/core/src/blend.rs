@@ -36,11 +36,68 @@ pub fn blend_pixel(lighting: Vec3, shadow: Vec3, reflection: Vec3, refraction: V
     combine(c, reflection, refraction, optical.x, 1.0 - optical.z)
 }
 
-/// Linear colour → 8-bit sRGB (the blend stage's gamma correction).
+/// Linear colour → 8-bit sRGB (the blend stage's gamma correction): each channel
+/// `(linear_to_srgb(v) · 255 + 0.5)` truncated, non-finite values as 0, computed by
+/// [`encode_srgb_channel`].
 #[inline]
 pub fn encode_srgb(c: Vec3) -> [u8; 4] {
-    let e = |v: f32| (hybrid_scene::texture::linear_to_srgb(if v.is_finite() { v } else { 0.0 }) * 255.0 + 0.5) as u8;
-    [e(c.x), e(c.y), e(c.z), 255]
+    [encode_srgb_channel(c.x), encode_srgb_channel(c.y), encode_srgb_channel(c.z), 255]
+}
+
+/// The definition of one [`encode_srgb`] channel, with a `powf` per call.
+#[inline]
+fn encode_srgb_channel_reference(v: f32) -> u8 {
+    (hybrid_scene::texture::linear_to_srgb(if v.is_finite() { v } else { 0.0 }) * 255.0 + 0.5) as u8
+}
+
+/// Tables that give [`encode_srgb_channel_reference`] without `powf`.
+struct SrgbEncodeTables {
+    /// `first[k]`: bits of the smallest f32 in (0, 1) whose code is ≥ k (`first[0]` unused).
+    first: [u32; 256],
+    /// Code of the smallest f32 of each bucket of 2¹⁶ bit patterns (`bits >> 16`) below 1.0.
+    bucket: Vec<u8>,
+}
+
+fn srgb_encode_tables() -> &'static SrgbEncodeTables {
+    static TABLES: std::sync::OnceLock<SrgbEncodeTables> = std::sync::OnceLock::new();
+    TABLES.get_or_init(|| {
+        let code = |bits: u32| encode_srgb_channel_reference(f32::from_bits(bits));
+        let one = 1.0f32.to_bits();
+        // The code never decreases as the value grows (tested over all of [0, 1]), so each
+        // threshold is found by bisection over the bit patterns (positive floats order as their bits).
+        let first = std::array::from_fn(|k| {
+            let (mut lo, mut hi) = (0u32, one);
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                if code(mid) as usize >= k { hi = mid } else { lo = mid + 1 }
+            }
+            lo
+        });
+        let bucket = (0..=one >> 16).map(|j| code(j << 16)).collect();
+        SrgbEncodeTables { first, bucket }
+    })
+}
+
+/// One channel of [`encode_srgb`]: exactly `(linear_to_srgb(v) · 255 + 0.5) as u8` (non-finite
+/// values as 0), without its `powf`: a table gives the code at the start of the value's bucket of
+/// 2¹⁶ float bit patterns and at most a step or two up the 255 exact thresholds finishes it. The
+/// blend stage encodes every pixel, and `powf` was most of its time.
+#[inline]
+pub fn encode_srgb_channel(v: f32) -> u8 {
+    if !(v > 0.0) || v.is_infinite() {
+        // Negative, zero, NaN, and ±infinity (non-finite values count as 0).
+        return 0;
+    }
+    if v >= 1.0 {
+        return 255;
+    }
+    let t = srgb_encode_tables();
+    let bits = v.to_bits();
+    let mut k = t.bucket[(bits >> 16) as usize];
+    while k < 255 && bits >= t.first[k as usize + 1] {
+        k += 1;
+    }
+    k
 }
 
 #[cfg(test)]
@@ -88,6 +145,18 @@ mod tests {
         assert!(close(combine(c, m, r, 0.0, 1.0), r)); // glass: CM = R, CR = R
         // Both 1: CM = M, CR = R → average.
         assert!(close(combine(c, m, r, 1.0, 1.0), (m + r) * 0.5));
+    }
+
+    #[test]
+    fn srgb_channel_tables_equal_the_definition() {
+        // Every f32 in [0, 1] (about 3 s), and the values outside.
+        for b in 0..=1.0f32.to_bits() {
+            let v = f32::from_bits(b);
+            assert_eq!(encode_srgb_channel(v), encode_srgb_channel_reference(v), "{v:e}");
+        }
+        for v in [-0.0, -1e-45, -1.0, 1.5, f32::MAX, f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            assert_eq!(encode_srgb_channel(v), encode_srgb_channel_reference(v), "{v:e}");
+        }
     }
 
     #[test]

@@ -11,7 +11,7 @@
 //! [`pack_unorm4x8`] does: `floor(0.5 + 255·clamp(c, 0, 1))`).
 
 use glam::Vec3;
-use hybrid_scene::texture::{linear_to_srgb, srgb_to_linear};
+use hybrid_scene::texture::{linear_to_srgb, srgb_byte_to_linear};
 use serde::Serialize;
 
 use crate::buffers::RtLayer;
@@ -84,7 +84,7 @@ pub fn decode_texel(t: [u16; 4]) -> Option<(Vec3, f32)> {
     if !alpha_kept(alpha) {
         return None;
     }
-    let lin = |b: u8| srgb_to_linear(b as f32 / 255.0);
+    let lin = srgb_byte_to_linear;
     Some((Vec3::new(lin(rgba[0]), lin(rgba[1]), lin(rgba[2])), depth))
 }
 
@@ -121,13 +121,20 @@ impl PackedRtFrame {
 /// alpha ≤ 0.1 was discarded).
 pub fn unpack(frame: &PackedRtFrame) -> RtLayer {
     let mut layer = RtLayer::new(frame.width, frame.height);
-    for (i, t) in frame.texels.iter().enumerate().take(layer.depth.len()) {
-        if let Some((c, d)) = decode_texel(*t) {
-            layer.color[i] = c;
-            layer.depth[i] = d;
+    unpack_into(&frame.texels, &mut layer.color, &mut layer.depth);
+    layer
+}
+
+/// Block U over a run of texels into the matching run of an [`RtLayer`] (for a caller that
+/// splits the frame into parallel parts): kept texels overwrite `color` and `depth`, discarded
+/// ones leave them as they are.
+pub fn unpack_into(texels: &[[u16; 4]], color: &mut [Vec3], depth: &mut [f32]) {
+    for ((t, c), d) in texels.iter().zip(color).zip(depth) {
+        if let Some((linear, z)) = decode_texel(*t) {
+            *c = linear;
+            *d = z;
         }
     }
-    layer
 }
 
 /// Block D, perspective, reversed-Z: `t` is the hit parameter along a ray from the camera whose

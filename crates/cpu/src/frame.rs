@@ -5,11 +5,12 @@ use std::time::Instant;
 
 use glam::Vec3;
 pub use hybrid_core::Frame;
-use hybrid_core::depth_merge::{PackedRtFrame, unpack};
+use hybrid_core::depth_merge::{PackedRtFrame, unpack_into};
 use hybrid_core::report::{CapsuleReport, FrameReport, RayCounts, StageTimings};
 use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RtLayer};
 use hybrid_heuristic::{Heuristic, HeuristicReport, count_visible_pixels, frame_input, object_inputs, write_mask};
 use hybrid_scene::{Camera, Scene};
+use rayon::prelude::*;
 
 use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, RtCapsule};
@@ -151,7 +152,15 @@ impl<'s> CpuRenderer<'s> {
         let request = CapsuleRequest { camera: *camera, width: settings.width, height: settings.height, clip_depth };
         let stats = capsule.render(&request, &mut packed);
         let unpack_start = Instant::now();
-        let layer = unpack(&packed);
+        // Block U, in parallel runs of rows (each texel is independent).
+        let mut layer = RtLayer::new(settings.width, settings.height);
+        const RUN: usize = 16 * 1024;
+        layer
+            .color
+            .par_chunks_mut(RUN)
+            .zip(layer.depth.par_chunks_mut(RUN))
+            .zip(packed.texels.par_chunks(RUN))
+            .for_each(|((color, depth), texels)| unpack_into(texels, color, depth));
         let report = CapsuleReport {
             points: stats.points,
             build_ms: stats.build_ms,

@@ -42,6 +42,13 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     if c <= 0.003_130_8 { c * 12.92 } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 }
 }
 
+/// An sRGB-encoded byte decoded to linear: exactly `srgb_to_linear(b as f32 / 255.0)`, from a
+/// table.
+#[inline]
+pub fn srgb_byte_to_linear(b: u8) -> f32 {
+    srgb_lut()[b as usize]
+}
+
 fn srgb_lut() -> &'static [f32; 256] {
     static LUT: OnceLock<[f32; 256]> = OnceLock::new();
     LUT.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
