@@ -126,14 +126,11 @@ pub fn unpack(frame: &PackedRtFrame) -> RtLayer {
 }
 
 /// Block U over a run of texels into the matching run of an [`RtLayer`] (for a caller that
-/// splits the frame into parallel parts): kept texels overwrite `color` and `depth`, discarded
-/// ones leave them as they are.
+/// splits the frame into parallel parts, or reuses a layer): every pixel is written, discarded
+/// texels as colour 0 and depth 0.
 pub fn unpack_into(texels: &[[u16; 4]], color: &mut [Vec3], depth: &mut [f32]) {
     for ((t, c), d) in texels.iter().zip(color).zip(depth) {
-        if let Some((linear, z)) = decode_texel(*t) {
-            *c = linear;
-            *d = z;
-        }
+        (*c, *d) = decode_texel(*t).unwrap_or((Vec3::ZERO, 0.0));
     }
 }
 

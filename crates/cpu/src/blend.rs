@@ -9,9 +9,15 @@ use rayon::prelude::*;
 /// Inputs: the P-buffer (`lighting`), the trace outputs and the G-buffer's optical + mask
 /// targets. Output: the final 8-bit sRGB image.
 pub fn blend(gbuffer: &GBuffer, lighting: &[Vec3], shadow: &[Vec3], reflection: &[Vec3], refraction: &[Vec3]) -> Vec<[u8; 4]> {
-    (0..gbuffer.len())
-        .into_par_iter()
-        .with_min_len(1024)
-        .map(|i| encode_srgb(blend_pixel(lighting[i], shadow[i], reflection[i], refraction[i], gbuffer.optical[i], gbuffer.mask[i])))
-        .collect()
+    let mut out = Vec::new();
+    blend_into(gbuffer, lighting, shadow, reflection, refraction, &mut out);
+    out
+}
+
+/// [`blend`] into `out` (resized to the G-buffer; every pixel written), reusing its memory.
+pub fn blend_into(gbuffer: &GBuffer, lighting: &[Vec3], shadow: &[Vec3], reflection: &[Vec3], refraction: &[Vec3], out: &mut Vec<[u8; 4]>) {
+    out.resize(gbuffer.len(), [0; 4]);
+    out.par_iter_mut().enumerate().with_min_len(4096).for_each(|(i, px)| {
+        *px = encode_srgb(blend_pixel(lighting[i], shadow[i], reflection[i], refraction[i], gbuffer.optical[i], gbuffer.mask[i]));
+    });
 }

@@ -36,6 +36,12 @@ pub struct CpuRenderer<'s> {
     /// A G-buffer handed back with [`CpuRenderer::recycle`], reused by the next raster (saves
     /// allocating and page-faulting ~100 MB per 1280×720 frame).
     spare_gbuffer: Option<GBuffer>,
+    /// The other per-frame buffers handed back with [`CpuRenderer::recycle`] (lighting, trace
+    /// outputs and final image: ~150 MB at 1920×1080), and the packed RT frame.
+    spare_buffers: Option<FrameBuffers>,
+    spare_packed: Option<PackedRtFrame>,
+    /// The unpacked RT layer of the last frame (block U's output, kept for the next frame).
+    spare_rt_layer: Option<RtLayer>,
 }
 
 impl<'s> CpuRenderer<'s> {
@@ -58,6 +64,9 @@ impl<'s> CpuRenderer<'s> {
             clip_capsule_at_raster_depth: false,
             spheres_in_trace: true,
             spare_gbuffer: None,
+            spare_buffers: None,
+            spare_packed: None,
+            spare_rt_layer: None,
         })
     }
 
@@ -65,10 +74,13 @@ impl<'s> CpuRenderer<'s> {
         &self.prepared
     }
 
-    /// Hands a finished frame back so the next frame reuses its G-buffer memory (for loops that
-    /// render many frames; optional).
+    /// Hands a finished frame back so the next frame reuses its memory (G-buffer, lighting,
+    /// trace outputs, final image, packed RT frame) instead of allocating and page-faulting it
+    /// anew (for loops that render many frames; optional).
     pub fn recycle(&mut self, frame: Frame) {
         self.spare_gbuffer = Some(frame.gbuffer);
+        self.spare_buffers = Some(frame.buffers);
+        self.spare_packed = frame.rt_packed;
     }
 
     /// Renders one frame. `on_stage` is told each stage's name as it starts (progress display).
@@ -77,7 +89,18 @@ impl<'s> CpuRenderer<'s> {
         let mut t = StageTimings::default();
         let mode = settings.mode;
 
-        let (mut gbuffer, lighting, primary_rays, rt_packed, capsule_report) = if self.clip_capsule_at_raster_depth {
+        let mut buffers = self.spare_buffers.take().unwrap_or_else(|| FrameBuffers {
+            width: 0,
+            height: 0,
+            lighting: Vec::new(),
+            shadow: Vec::new(),
+            reflection: Vec::new(),
+            refraction: Vec::new(),
+            final_srgb: Vec::new(),
+        });
+        (buffers.width, buffers.height) = (settings.width, settings.height);
+
+        let (mut gbuffer, primary_rays, rt_packed, capsule_report) = if self.clip_capsule_at_raster_depth {
             // Beyond paper 2: raster first, then the capsule with rays clipped at the polygons.
             on_stage("raster");
             let (mut gbuffer, primary_rays) = timed(&mut t.raster, || self.geometry_stage(camera, settings, None));
@@ -87,16 +110,18 @@ impl<'s> CpuRenderer<'s> {
             if let Some(layer) = &rt_layer {
                 raster::merge_rt_layer(&mut gbuffer, layer, camera);
             }
-            let lighting = timed(&mut t.lighting, || lighting::deferred_lighting(&gbuffer, self.scene, camera));
-            (gbuffer, lighting, primary_rays, rt_packed, capsule_report)
+            self.spare_rt_layer = rt_layer;
+            timed(&mut t.lighting, || lighting::deferred_lighting_into(&gbuffer, self.scene, camera, &mut buffers.lighting));
+            (gbuffer, primary_rays, rt_packed, capsule_report)
         } else {
             // Paper 2: the capsule's frame first, merged by depth as the polygons are drawn.
             on_stage("capsule");
             let (rt_packed, rt_layer, capsule_report) = timed(&mut t.capsule, || self.capsule_stage(camera, settings, None));
             on_stage("raster");
             let (gbuffer, primary_rays) = timed(&mut t.raster, || self.geometry_stage(camera, settings, rt_layer.as_ref()));
-            let lighting = timed(&mut t.lighting, || lighting::deferred_lighting(&gbuffer, self.scene, camera));
-            (gbuffer, lighting, primary_rays, rt_packed, capsule_report)
+            self.spare_rt_layer = rt_layer;
+            timed(&mut t.lighting, || lighting::deferred_lighting_into(&gbuffer, self.scene, camera, &mut buffers.lighting));
+            (gbuffer, primary_rays, rt_packed, capsule_report)
         };
         t.raster += t.lighting;
 
@@ -104,16 +129,19 @@ impl<'s> CpuRenderer<'s> {
         let heuristic_report = timed(&mut t.heuristic, || self.heuristic_stage(&mut gbuffer, camera, mode));
 
         on_stage("trace");
-        let traced = timed(&mut t.trace, || self.trace_stage(&gbuffer, camera, mode));
+        let traced_rays = timed(&mut t.trace, || {
+            self.trace_stage(&gbuffer, camera, mode, [&mut buffers.shadow, &mut buffers.reflection, &mut buffers.refraction])
+        });
 
         on_stage("blend");
-        let final_srgb = timed(&mut t.blend, || blend::blend(&gbuffer, &lighting, &traced.shadow, &traced.reflection, &traced.refraction));
+        let b = &mut buffers;
+        timed(&mut t.blend, || blend::blend_into(&gbuffer, &b.lighting, &b.shadow, &b.reflection, &b.refraction, &mut b.final_srgb));
 
         if mode == Mode::Hybrid {
             self.heuristic.record_trace(heuristic_report.as_ref().map_or(0.0, |r| r.spent), t.trace);
         }
         t.frame = ms_since(frame_start);
-        let rays = RayCounts { primary: primary_rays, ..traced.rays };
+        let rays = RayCounts { primary: primary_rays, ..traced_rays };
         let report = FrameReport {
             backend: "cpu".into(),
             size: [settings.width, settings.height],
@@ -127,15 +155,6 @@ impl<'s> CpuRenderer<'s> {
             gpu_timings_ms: None,
             adapter: None,
         };
-        let buffers = FrameBuffers {
-            width: settings.width,
-            height: settings.height,
-            lighting,
-            shadow: traced.shadow,
-            reflection: traced.reflection,
-            refraction: traced.refraction,
-            final_srgb,
-        };
         Frame { settings, gbuffer, buffers, rt_packed, report }
     }
 
@@ -148,12 +167,18 @@ impl<'s> CpuRenderer<'s> {
         clip_depth: Option<&[f32]>,
     ) -> (Option<PackedRtFrame>, Option<RtLayer>, Option<CapsuleReport>) {
         let Some(capsule) = self.capsule.as_mut() else { return (None, None, None) };
-        let mut packed = PackedRtFrame::new(settings.width, settings.height);
+        // `render` resizes and clears it.
+        let mut packed = self.spare_packed.take().unwrap_or_else(|| PackedRtFrame::new(0, 0));
         let request = CapsuleRequest { camera: *camera, width: settings.width, height: settings.height, clip_depth };
         let stats = capsule.render(&request, &mut packed);
         let unpack_start = Instant::now();
         // Block U, in parallel runs of rows (each texel is independent).
-        let mut layer = RtLayer::new(settings.width, settings.height);
+        // Every texel is written, so last frame's layer of the same size needs no clearing.
+        let mut layer = self
+            .spare_rt_layer
+            .take()
+            .filter(|l| (l.width, l.height) == (settings.width, settings.height))
+            .unwrap_or_else(|| RtLayer::new(settings.width, settings.height));
         const RUN: usize = 16 * 1024;
         layer
             .color
@@ -218,19 +243,19 @@ impl<'s> CpuRenderer<'s> {
         }
     }
 
-    /// Stage 3: shadow, reflection and refraction rays for masked pixels (listings 8a–d).
-    fn trace_stage(&self, gbuffer: &GBuffer, camera: &Camera, mode: Mode) -> trace::TraceOutput {
+    /// Stage 3: shadow, reflection and refraction rays for masked pixels (listings 8a–d), into
+    /// `[shadow, reflection, refraction]`.
+    fn trace_stage(&self, gbuffer: &GBuffer, camera: &Camera, mode: Mode, out: [&mut Vec<Vec3>; 3]) -> RayCounts {
         if mode == Mode::Raster {
             let n = gbuffer.len();
-            return trace::TraceOutput {
-                shadow: vec![Vec3::ONE; n],
-                reflection: vec![Vec3::ZERO; n],
-                refraction: vec![Vec3::ZERO; n],
-                rays: Default::default(),
-            };
+            for (buffer, untraced) in out.into_iter().zip([Vec3::ONE, Vec3::ZERO, Vec3::ZERO]) {
+                buffer.clear();
+                buffer.resize(n, untraced);
+            }
+            return RayCounts::default();
         }
         let spheres = self.capsule.as_ref().filter(|_| self.spheres_in_trace);
-        trace::trace_with_spheres(&self.prepared, &self.bvh, spheres, gbuffer, camera)
+        trace::trace_with_spheres_into(&self.prepared, &self.bvh, spheres, gbuffer, camera, out)
     }
 }
 

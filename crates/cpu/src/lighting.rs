@@ -95,12 +95,23 @@ const LIGHTING_ROWS: usize = 8;
 /// parallel over rows. Per-light constants are computed once per frame ([`FrameLights`]), and
 /// only the targets lighting needs are read (same result as `local_lighting` per pixel).
 pub fn deferred_lighting(gbuffer: &GBuffer, scene: &Scene, camera: &Camera) -> Vec<Vec3> {
+    let mut out = Vec::new();
+    deferred_lighting_into(gbuffer, scene, camera, &mut out);
+    out
+}
+
+/// [`deferred_lighting`] into `out` (resized to the G-buffer; every pixel written), so a frame
+/// loop can reuse last frame's memory instead of allocating and page-faulting a new buffer.
+pub fn deferred_lighting_into(gbuffer: &GBuffer, scene: &Scene, camera: &Camera, out: &mut Vec<Vec3>) {
     let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
     let n = gbuffer.len();
-    if w == 0 || h == 0 || n != w * h {
-        return vec![Vec3::ZERO; n];
+    if out.len() != n || w == 0 || h == 0 || n != w * h {
+        out.clear();
+        out.resize(n, Vec3::ZERO);
     }
-    let mut out = vec![Vec3::ZERO; n];
+    if w == 0 || h == 0 || n != w * h {
+        return;
+    }
     let rays = ViewRays::new(camera, gbuffer.width, gbuffer.height);
     let env = &scene.environment;
     let frame_lights = FrameLights::new(&scene.lights, env);
@@ -140,7 +151,6 @@ pub fn deferred_lighting(gbuffer: &GBuffer, scene: &Scene, camera: &Camera) -> V
             };
         }
     });
-    out
 }
 
 #[cfg(test)]

@@ -75,12 +75,27 @@ pub fn trace_with_spheres(
     gbuffer: &GBuffer,
     camera: &Camera,
 ) -> TraceOutput {
+    let (mut shadow, mut reflection, mut refraction) = (Vec::new(), Vec::new(), Vec::new());
+    let rays = trace_with_spheres_into(prepared, bvh, spheres, gbuffer, camera, [&mut shadow, &mut reflection, &mut refraction]);
+    TraceOutput { shadow, reflection, refraction, rays }
+}
+
+/// [`trace_with_spheres`] into `[shadow, reflection, refraction]` (each resized to the G-buffer,
+/// every pixel written: untraced ones get 1, 0, 0), reusing their memory; returns the rays traced.
+pub fn trace_with_spheres_into(
+    prepared: &PreparedScene,
+    bvh: &SceneBvh,
+    spheres: Option<&PointCloudCapsule>,
+    gbuffer: &GBuffer,
+    camera: &Camera,
+    [shadow, reflection, refraction]: [&mut Vec<Vec3>; 3],
+) -> RayCounts {
     let n = gbuffer.len();
-    let mut shadow = vec![Vec3::ONE; n];
-    let mut reflection = vec![Vec3::ZERO; n];
-    let mut refraction = vec![Vec3::ZERO; n];
+    for b in [&mut *shadow, &mut *reflection, &mut *refraction] {
+        b.resize(n, Vec3::ZERO);
+    }
     let tracer = Tracer { prepared, bvh, spheres, camera, primary: PrimaryRays::new(camera, gbuffer.width, gbuffer.height) };
-    let rays = shadow
+    shadow
         .par_chunks_mut(CHUNK)
         .zip(reflection.par_chunks_mut(CHUNK))
         .zip(refraction.par_chunks_mut(CHUNK))
@@ -91,17 +106,18 @@ pub fn trace_with_spheres(
             let mut caches = vec![ShadowCache::default(); lights(&prepared.scene.lights).count()];
             for k in 0..s.len() {
                 let i = c * CHUNK + k;
-                if gbuffer.mask[i] > 0.0 {
-                    (s[k], m[k], r[k]) = tracer.pixel(gbuffer, i, &mut caches, &mut rays);
-                }
+                (s[k], m[k], r[k]) = if gbuffer.mask[i] > 0.0 {
+                    tracer.pixel(gbuffer, i, &mut caches, &mut rays)
+                } else {
+                    (Vec3::ONE, Vec3::ZERO, Vec3::ZERO)
+                };
             }
             rays
         })
         .reduce(RayCounts::default, |mut a, b| {
             a += b;
             a
-        });
-    TraceOutput { shadow, reflection, refraction, rays }
+        })
 }
 
 #[derive(Clone, Copy)]

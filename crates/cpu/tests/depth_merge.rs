@@ -111,3 +111,25 @@ fn spheres_cast_shadows_on_polygons_and_appear_in_reflections() {
     eprintln!("{reflected} reflection pixels show spheres");
     assert!(reflected > 0, "the mirror ball shows no sphere");
 }
+
+#[test]
+fn recycled_frames_give_identical_buffers() {
+    // Frames of changing size and mode (clipped capsule too), each rendered by a renderer that
+    // reuses the previous frame's memory and by a fresh one: every buffer must be equal.
+    let scene = tree_scene();
+    let camera = scene.camera_path.as_ref().unwrap().camera_at(&scene.camera, 10.0);
+    let mut reusing = CpuRenderer::new(&scene).unwrap();
+    let mut fresh = CpuRenderer::new(&scene).unwrap();
+    let frames = [(Mode::All, 96, 54, false), (Mode::Raster, 64, 40, false), (Mode::All, 64, 40, true), (Mode::RtOnly, 96, 54, false)];
+    for (mode, width, height, clip) in frames {
+        let settings = FrameSettings { width, height, mode };
+        reusing.clip_capsule_at_raster_depth = clip;
+        fresh.clip_capsule_at_raster_depth = clip;
+        let got = reusing.render(&camera, settings, &mut |_| {});
+        let expected = fresh.render(&camera, settings, &mut |_| {});
+        assert_eq!(got.gbuffer, expected.gbuffer, "{mode:?} {width}×{height}");
+        assert_eq!(got.buffers, expected.buffers, "{mode:?} {width}×{height}");
+        assert_eq!(got.rt_packed, expected.rt_packed, "{mode:?} {width}×{height}");
+        reusing.recycle(got);
+    }
+}
