@@ -84,8 +84,8 @@ fn srgb_encode_tables() -> &'static SrgbEncodeTables {
 /// blend stage encodes every pixel, and `powf` was most of its time.
 #[inline]
 pub fn encode_srgb_channel(v: f32) -> u8 {
-    if !(v > 0.0) || v.is_infinite() {
-        // Negative, zero, NaN, and ±infinity (non-finite values count as 0).
+    if v.is_nan() || v <= 0.0 || v.is_infinite() {
+        // NaN, negative, zero and ±infinity (non-finite values count as 0).
         return 0;
     }
     if v >= 1.0 {
