@@ -144,7 +144,49 @@ enum FrameLight {
     },
 }
 
+impl FrameLight {
+    /// As [`Light::incident`], bit for bit.
+    #[inline]
+    fn incident(&self, p: Vec3) -> (Vec3, Vec3) {
+        match *self {
+            FrameLight::Directional { to_light, radiance } => (to_light, radiance),
+            FrameLight::Point { position, power, attenuation } => {
+                let (dir, d) = to_position(p, position);
+                (dir, power * attenuation.factor(d))
+            }
+            FrameLight::Spot { position, direction, power, attenuation, cos_inner, cos_outer } => {
+                let (dir, d) = to_position(p, position);
+                let cone = spot_cone((-dir).dot(direction), cos_inner, cos_outer);
+                (dir, power * attenuation.factor(d) * cone)
+            }
+        }
+    }
+}
+
 impl FrameLights {
+    /// Light `k` (in [`lights`] order): [`Light::incident`], bit for bit.
+    #[inline]
+    pub fn incident(&self, k: usize, p: Vec3) -> (Vec3, Vec3) {
+        self.lights[k].incident(p)
+    }
+
+    /// Light `k` (in [`lights`] order): [`Light::blinn_phong`], bit for bit.
+    #[inline]
+    pub fn blinn_phong(&self, k: usize, s: &Surface, view: Vec3) -> Vec3 {
+        let (l, radiance) = self.lights[k].incident(s.position);
+        if radiance == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        let n = facing(s.normal, view);
+        let n_dot_l = n.dot(l);
+        if n_dot_l <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let h = (l + view).normalize_or_zero();
+        let spec = if s.specular == Vec3::ZERO { Vec3::ZERO } else { s.specular * n.dot(h).max(0.0).powf(specular_exponent(s.shininess)) };
+        (s.diffuse * n_dot_l + spec) * radiance
+    }
+
     pub fn new(all: &Lights, env: &Environment) -> Self {
         let lights = lights(all)
             .map(|l| match l {
@@ -174,18 +216,7 @@ impl FrameLights {
         let exponent = specular_exponent(s.shininess);
         let has_specular = s.specular != Vec3::ZERO;
         for light in &self.lights {
-            let (l, radiance) = match *light {
-                FrameLight::Directional { to_light, radiance } => (to_light, radiance),
-                FrameLight::Point { position, power, attenuation } => {
-                    let (dir, d) = to_position(s.position, position);
-                    (dir, power * attenuation.factor(d))
-                }
-                FrameLight::Spot { position, direction, power, attenuation, cos_inner, cos_outer } => {
-                    let (dir, d) = to_position(s.position, position);
-                    let cone = spot_cone((-dir).dot(direction), cos_inner, cos_outer);
-                    (dir, power * attenuation.factor(d) * cone)
-                }
-            };
+            let (l, radiance) = light.incident(s.position);
             // Lights that contribute nothing still add +0 (as `local_lighting` does: −0 + 0 = +0).
             if radiance == Vec3::ZERO {
                 c += Vec3::ZERO;
@@ -369,6 +400,11 @@ mod tests {
             };
             let view = Vec3::new(r(), r(), r()).normalize_or(Vec3::Z);
             assert_eq!(bits(fast.local_lighting(&s, view)), bits(local_lighting(&s, view, &all, &env)), "{s:?} {view}");
+            for (i, light) in lights(&all).enumerate() {
+                let ((l0, r0), (l1, r1)) = (fast.incident(i, s.position), light.incident(s.position));
+                assert_eq!((bits(l0), bits(r0)), (bits(l1), bits(r1)), "light {i}: {s:?}");
+                assert_eq!(bits(fast.blinn_phong(i, &s, view)), bits(light.blinn_phong(&s, view)), "light {i}: {s:?} {view}");
+            }
         }
         // No lights: emission + ambient only.
         let none = FrameLights::new(&Lights::default(), &env);

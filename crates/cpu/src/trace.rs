@@ -29,7 +29,7 @@
 
 use glam::{DMat4, DVec3, Vec2, Vec3};
 use hybrid_core::blend::combine;
-use hybrid_core::shading::{facing, lights, local_lighting, reflect, refract_or_reflect, sky};
+use hybrid_core::shading::{FrameLights, facing, lights, reflect, refract_or_reflect, sky};
 use hybrid_core::{GBuffer, Surface};
 use hybrid_scene::{Camera, Projection};
 use rayon::prelude::*;
@@ -94,7 +94,14 @@ pub fn trace_with_spheres_into(
     for b in [&mut *shadow, &mut *reflection, &mut *refraction] {
         b.resize(n, Vec3::ZERO);
     }
-    let tracer = Tracer { prepared, bvh, spheres, camera, primary: PrimaryRays::new(camera, gbuffer.width, gbuffer.height) };
+    let tracer = Tracer {
+        prepared,
+        bvh,
+        spheres,
+        camera,
+        primary: PrimaryRays::new(camera, gbuffer.width, gbuffer.height),
+        frame_lights: FrameLights::new(&prepared.scene.lights, &prepared.scene.environment),
+    };
     shadow
         .par_chunks_mut(CHUNK)
         .zip(reflection.par_chunks_mut(CHUNK))
@@ -132,6 +139,8 @@ struct Tracer<'a, 's> {
     spheres: Option<&'a PointCloudCapsule>,
     camera: &'a Camera,
     primary: PrimaryRays,
+    /// The scene's lights with their per-frame constants (same shading, bit for bit).
+    frame_lights: FrameLights,
 }
 
 impl Tracer<'_, '_> {
@@ -155,14 +164,14 @@ impl Tracer<'_, '_> {
 
         let mut shadow = Vec3::ONE;
         let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
-        for (light, cache) in lights(&scene.lights).zip(caches.iter_mut()) {
+        for (k, (light, cache)) in lights(&scene.lights).zip(caches.iter_mut()).enumerate() {
             if !light.casts_shadows() || unlit {
                 continue;
             }
             // The cheap half of Blinn–Phong first (no radiance, or the light behind the
             // surface: it contributes nothing, so no ray); the full term only where the ray
             // finds a blocker.
-            let (l, radiance) = light.incident(s.position);
+            let (l, radiance) = self.frame_lights.incident(k, s.position);
             if radiance == Vec3::ZERO || facing(s.normal, view).dot(l) <= 0.0 {
                 continue;
             }
@@ -174,7 +183,7 @@ impl Tracer<'_, '_> {
                 att = 0.0;
             }
             if att < 1.0 {
-                shadow -= light.blinn_phong(&s, view) * (1.0 - att);
+                shadow -= self.frame_lights.blinn_phong(k, &s, view) * (1.0 - att);
             }
         }
 
@@ -236,8 +245,7 @@ impl Tracer<'_, '_> {
             let (d, _tir) = refract_or_reflect(dir, s.normal, scene.environment.ior, s.ior);
             refr = self.secondary(self.offset(&s, d), d, refr_imp, depth + 1, Kind::Refraction, rays);
         }
-        let lighting =
-            if reflectivity < 1.0 && transparency < 1.0 { local_lighting(&s, -dir, &scene.lights, &scene.environment) } else { Vec3::ZERO };
+        let lighting = if reflectivity < 1.0 && transparency < 1.0 { self.frame_lights.local_lighting(&s, -dir) } else { Vec3::ZERO };
         if depth >= max_depth {
             refl = lighting;
             refr = lighting;
