@@ -122,6 +122,16 @@ pub struct BenchArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Beyond paper 2: trace the point-cloud capsule after the raster, clipping its rays at the
+    /// polygons' depth (as `render --clip-capsule`): fewer capsule rays, at the cost of running
+    /// the capsule after (not beside) the raster.
+    #[arg(long)]
+    pub clip_capsule: bool,
+    /// Paper 2's behaviour (as `render --no-sphere-effects`): the point cloud only merges by depth,
+    /// no shadows on polygons, not in reflections or refractions. Faster trace stage, at the cost
+    /// of those effects.
+    #[arg(long)]
+    pub no_sphere_effects: bool,
     /// No progress lines on stderr.
     #[arg(short, long)]
     pub quiet: bool,

@@ -373,7 +373,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     }
 
     let machine_start = load_average();
-    let options = RenderOptions { clip_capsule: false, sphere_effects: true };
+    let options = RenderOptions { clip_capsule: args.clip_capsule, sphere_effects: !args.no_sphere_effects };
     let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options };
     let mut modes: Vec<Mode> = Vec::new();
     for m in &args.modes {
@@ -512,6 +512,8 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
             "budget": budget_desc,
             "policy": policy_name(scene.heuristic.policy),
             "importance": scene.heuristic.importance,
+            "clip_capsule": args.clip_capsule,
+            "sphere_effects": !args.no_sphere_effects,
         },
         "machine": machine,
         "static": static_summary,

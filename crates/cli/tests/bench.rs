@@ -142,9 +142,23 @@ fn millisecond_budget_is_reported_per_frame() {
     assert!((0.0..=1.0).contains(&rate));
     assert!(json["static"].get("all").is_none());
     assert_eq!(json["settings"]["budget"]["ms"], 0.5);
+    // Paper 2's defaults: unclipped capsule, spheres in the trace stage.
+    assert_eq!(json["settings"]["clip_capsule"], false);
+    assert_eq!(json["settings"]["sphere_effects"], true);
     let (header, rows) = csv(&out.join("frames.csv"));
     let b = col(&header, "budget_ms");
     assert!(rows.iter().filter(|r| r[col(&header, "mode")] == "hybrid").all(|r| r[b] == "0.5"));
+}
+
+#[test]
+fn capsule_options_are_taken_and_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    let o = tiny_bench(&out, &["--modes", "hybrid", "--clip-capsule", "--no-sphere-effects"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(json["settings"]["clip_capsule"], true);
+    assert_eq!(json["settings"]["sphere_effects"], false);
 }
 
 fn assert_bad_input(args: &[&str], out: &Path, needle: &str) {
