@@ -68,19 +68,24 @@ impl Light<'_> {
     /// towards the viewer). Unshadowed.
     #[inline]
     pub fn blinn_phong(&self, s: &Surface, view: Vec3) -> Vec3 {
-        let (l, radiance) = self.incident(s.position);
-        if radiance == Vec3::ZERO {
-            return Vec3::ZERO;
-        }
-        let n = facing(s.normal, view);
-        let n_dot_l = n.dot(l);
-        if n_dot_l <= 0.0 {
-            return Vec3::ZERO;
-        }
-        let h = (l + view).normalize_or_zero();
-        let spec = if s.specular == Vec3::ZERO { Vec3::ZERO } else { s.specular * n.dot(h).max(0.0).powf(specular_exponent(s.shininess)) };
-        (s.diffuse * n_dot_l + spec) * radiance
+        blinn_phong_from(self.incident(s.position), s, view)
     }
+}
+
+/// Blinn–Phong of one light arriving as `(direction towards the light, radiance)` at `s`.
+#[inline]
+fn blinn_phong_from((l, radiance): (Vec3, Vec3), s: &Surface, view: Vec3) -> Vec3 {
+    if radiance == Vec3::ZERO {
+        return Vec3::ZERO;
+    }
+    let n = facing(s.normal, view);
+    let n_dot_l = n.dot(l);
+    if n_dot_l <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let h = (l + view).normalize_or_zero();
+    let spec = if s.specular == Vec3::ZERO { Vec3::ZERO } else { s.specular * n.dot(h).max(0.0).powf(specular_exponent(s.shininess)) };
+    (s.diffuse * n_dot_l + spec) * radiance
 }
 
 fn to_position(p: Vec3, light: Vec3) -> (Vec3, f32) {
@@ -173,18 +178,7 @@ impl FrameLights {
     /// Light `k` (in [`lights`] order): [`Light::blinn_phong`], bit for bit.
     #[inline]
     pub fn blinn_phong(&self, k: usize, s: &Surface, view: Vec3) -> Vec3 {
-        let (l, radiance) = self.lights[k].incident(s.position);
-        if radiance == Vec3::ZERO {
-            return Vec3::ZERO;
-        }
-        let n = facing(s.normal, view);
-        let n_dot_l = n.dot(l);
-        if n_dot_l <= 0.0 {
-            return Vec3::ZERO;
-        }
-        let h = (l + view).normalize_or_zero();
-        let spec = if s.specular == Vec3::ZERO { Vec3::ZERO } else { s.specular * n.dot(h).max(0.0).powf(specular_exponent(s.shininess)) };
-        (s.diffuse * n_dot_l + spec) * radiance
+        blinn_phong_from(self.lights[k].incident(s.position), s, view)
     }
 
     pub fn new(all: &Lights, env: &Environment) -> Self {
