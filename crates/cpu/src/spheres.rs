@@ -21,9 +21,10 @@
 //!   cheaper slab test that enters every child the padded one enters ([`Ray::slab4`]).
 //! - **Batches** ([`SphereBvh::closest_hits_batch`], a screen tile's primary rays): rays from one
 //!   origin share the top of the tree. The batch's frustum, bounded by its rays' extreme inverse
-//!   directions, is tested against the nodes once, giving a cut of ≤ 16 subtrees that holds
-//!   everything any of its rays may enter; each ray starts from the cut (its entered subtrees
-//!   nearest first) instead of the root. On the 1M-point tree scan this halves the node visits.
+//!   directions, is tested against the nodes once, giving a cut of ≤ 32 subtrees that holds
+//!   everything any of its rays may enter (under two levels of 4-wide nodes of its own); each ray
+//!   starts from the cut (its entered subtrees nearest first) instead of the root. On the
+//!   1M-point tree scan at 1080p (16×16 tiles) the slab tests per frame fall from 14.1M to 6.1M.
 
 use glam::{Vec3, Vec4};
 
@@ -50,7 +51,7 @@ impl Default for TraversalStack {
 /// Relative slack of the slab test for rays with `t_min ≥ 0` (see [`Ray::slab4`]).
 const NONNEG_SLACK: f32 = 1.0 + 3e-5;
 /// Most subtrees in a batch's cut ([`SphereBvh::closest_hits_batch`]).
-const CUT_MAX: usize = 16;
+const CUT_MAX: usize = 32;
 
 /// One ray of a batch ([`SphereBvh::closest_hits_batch`]); the arguments of
 /// [`SphereBvh::closest_hit_slot_with`].
@@ -62,7 +63,7 @@ pub struct BatchRay {
     pub t_max: f32,
 }
 
-/// One subtree of a batch's cut: its reference and box, and whether it may still be opened.
+/// One subtree of a batch's cut: its reference, box and box area, and whether it is an inner node.
 #[derive(Debug, Clone, Copy)]
 struct CutEntry {
     child: u32,
@@ -78,6 +79,7 @@ pub struct BatchScratch {
     rays: Vec<Option<(Ray, f32)>>,
     cut: Vec<CutEntry>,
     chunks: Vec<Node4>,
+    tops: Vec<Node4>,
 }
 
 /// Largest number of spheres (leaf starts have 27 bits).
@@ -331,7 +333,7 @@ impl SphereBvh {
         prepared.extend(rays.iter().map(|r| self.prepare(r.origin, r.dir, r.t_min, r.t_max)));
         let shared = rays.first().map(|r| r.origin.to_array());
         let cut = shared.is_some_and(|o| rays.iter().all(|r| r.origin.to_array() == o)) && self.root & LEAF == 0;
-        let chunks = if cut { self.batch_cut(scratch) } else { 0 };
+        let cut = cut && self.batch_cut(scratch);
         let stack = &mut stack.0;
         for (p, hit) in scratch.rays.iter().zip(hits.iter_mut()) {
             *hit = None;
@@ -341,7 +343,7 @@ impl SphereBvh {
                 *hit = self.traverse::<false>(stack, ray, *len, self.root);
                 continue;
             }
-            if chunks == 0 {
+            if !cut {
                 *hit = self.traverse::<true>(stack, ray, *len, self.root);
                 continue;
             }
@@ -349,20 +351,25 @@ impl SphereBvh {
             // others stacked farthest first (as an inner node's children).
             let mut order = [(0u32, 0f32); CUT_MAX];
             let mut k = 0;
-            for node in &scratch.chunks[..chunks] {
-                let (entry, mut mask) = ray.slab4::<true>(node, ray.t_max);
-                let entry = entry.to_array();
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let item = (node.child[lane], entry[lane]);
-                    let mut j = k;
-                    while j > 0 && order[j - 1].1 > item.1 {
-                        order[j] = order[j - 1];
-                        j -= 1;
+            for (top, chunks) in scratch.tops.iter().zip(scratch.chunks.chunks(4)) {
+                let (_, mut chunk_mask) = ray.slab4::<true>(top, ray.t_max);
+                while chunk_mask != 0 {
+                    let node = &chunks[chunk_mask.trailing_zeros() as usize];
+                    chunk_mask &= chunk_mask - 1;
+                    let (entry, mut mask) = ray.slab4::<true>(node, ray.t_max);
+                    let entry = entry.to_array();
+                    while mask != 0 {
+                        let lane = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let item = (node.child[lane], entry[lane]);
+                        let mut j = k;
+                        while j > 0 && order[j - 1].1 > item.1 {
+                            order[j] = order[j - 1];
+                            j -= 1;
+                        }
+                        order[j] = item;
+                        k += 1;
                     }
-                    order[j] = item;
-                    k += 1;
                 }
             }
             if k == 0 {
@@ -376,8 +383,9 @@ impl SphereBvh {
     /// The cut of the tree for the prepared rays in `scratch` (those with `t_min ≥ 0`; all share
     /// one origin): subtrees, at most `CUT_MAX`, such that any node or leaf one of these rays
     /// enters (by [`Ray::slab4`]'s `NONNEG` test) on its way down from the root lies in one of them.
-    /// Stored as 4-wide nodes in `scratch.chunks` (their boxes as in their parents); returns how
-    /// many (0: no ray to trace).
+    /// Stored as 4-wide nodes in `scratch.chunks` (their boxes as in their parents) under
+    /// 4-wide nodes in `scratch.tops` (one per four chunks); returns false when there is no ray to
+    /// trace (then the scratch is stale).
     ///
     /// The batch's test bounds each ray's: per axis (where all the rays' directions have one
     /// sign) the slab plane distances `fl((p − o)·inv)` are monotone in `inv`, so they lie between
@@ -385,7 +393,7 @@ impl SphereBvh {
     /// batch's and its `far` (with `limit ≤ t_max`) ≤ the batch's, and `near ≤ fl(far·S)` for the
     /// ray gives it for the batch (rounding is monotone). Axes along which the directions change
     /// sign are left out of the batch's test (no constraint).
-    fn batch_cut(&self, scratch: &mut BatchScratch) -> usize {
+    fn batch_cut(&self, scratch: &mut BatchScratch) -> bool {
         let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
         let (mut t_lo, mut t_hi) = (f32::INFINITY, f32::NEG_INFINITY);
         let mut origin = None;
@@ -396,7 +404,7 @@ impl SphereBvh {
             t_hi = t_hi.max(ray.t_max);
             origin = Some(ray.o);
         }
-        let Some(o) = origin else { return 0 };
+        let Some(o) = origin else { return false };
         let test = |n: &Node4| -> u32 {
             let mut near = Vec4::splat(t_lo);
             let mut far = Vec4::splat(t_hi);
@@ -419,9 +427,7 @@ impl SphereBvh {
         // Greedy: open the entry with the largest box while the cut stays within `CUT_MAX`.
         let cut = &mut scratch.cut;
         cut.clear();
-        let push_kids = |cut: &mut Vec<CutEntry>, at: usize, node: u32| {
-            let n = &self.nodes[node as usize];
-            let mut mask = test(n);
+        let push_kids = |cut: &mut Vec<CutEntry>, at: usize, n: &Node4, mut mask: u32| {
             let mut k = at;
             while mask != 0 {
                 let lane = mask.trailing_zeros() as usize;
@@ -438,18 +444,19 @@ impl SphereBvh {
                 k += 1;
             }
         };
-        push_kids(cut, 0, self.root);
+        let root = &self.nodes[self.root as usize];
+        push_kids(cut, 0, root, test(root));
+        // Stop at the first entry that does not fit (each try costs a node fetch).
         loop {
             let pick = (0..cut.len()).filter(|&i| cut[i].open).max_by(|&a, &b| cut[a].area.total_cmp(&cut[b].area));
             let Some(i) = pick else { break };
             let n = &self.nodes[cut[i].child as usize];
-            let fits = cut.len() - 1 + test(n).count_ones() as usize <= CUT_MAX;
-            if fits {
-                let node = cut.remove(i).child;
-                push_kids(cut, i, node);
-            } else {
-                cut[i].open = false;
+            let mask = test(n);
+            if cut.len() - 1 + mask.count_ones() as usize > CUT_MAX {
+                break;
             }
+            cut.remove(i);
+            push_kids(cut, i, n, mask);
         }
         scratch.chunks.clear();
         for group in cut.chunks(4) {
@@ -463,7 +470,20 @@ impl SphereBvh {
             }
             scratch.chunks.push(node);
         }
-        scratch.chunks.len()
+        // Two levels: the chunks, then 4-wide nodes over the chunks' bounding boxes (a ray that
+        // enters a box enters any box holding it: the slab distances are monotone in the planes).
+        scratch.tops.clear();
+        for group in scratch.chunks.chunks(4) {
+            let mut top = Node4::EMPTY;
+            for (lane, c) in group.iter().enumerate() {
+                for a in 0..3 {
+                    top.min[a][lane] = c.min[a].min_element();
+                    top.max[a][lane] = c.max[a].max_element();
+                }
+            }
+            scratch.tops.push(top);
+        }
+        true
     }
 
     /// Ordered depth-first traversal from the subtree `root`, then the subtrees on `stack`
