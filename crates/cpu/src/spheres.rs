@@ -309,7 +309,8 @@ impl SphereBvh {
         if !usable {
             return None;
         }
-        let ray = Ray::new(origin, dir / len, t_min * len, t_max * len, self.radius);
+        // `dir / len` as one vector division (the same quotients as three scalar ones).
+        let ray = Ray::new(origin, (dir.extend(0.0) / len).truncate(), t_min * len, t_max * len, self.radius);
         // Cull against the root box first.
         let (e, x) = ray.slab(self.root_min, self.root_max);
         if e > x { None } else { Some((ray, len)) }
@@ -616,9 +617,11 @@ struct Ray {
 impl Ray {
     #[inline]
     fn new(o: Vec3, d: Vec3, t_min: f32, t_max: f32, r: f32) -> Self {
-        // A finite stand-in for 1/0 keeps 0·(1/d) from becoming NaN when the origin lies on a slab plane.
-        let safe = |c: f32| if c.abs() < 1e-30 { 1e30f32.copysign(c) } else { 1.0 / c };
-        let inv = Vec3::new(safe(d.x), safe(d.y), safe(d.z));
+        // A finite stand-in for 1/0 keeps 0·(1/d) from becoming NaN when the origin lies on a slab
+        // plane. One vector division: each lane is the scalar `1.0 / c`, bit for bit.
+        let d4 = d.extend(1.0);
+        let tiny = d4.abs().cmplt(Vec4::splat(1e-30));
+        let inv = Vec4::select(tiny, Vec4::splat(1e30).copysign(d4), Vec4::ONE / d4).truncate();
         Self { o, d, inv, t_min, t_max, r }
     }
 
