@@ -71,6 +71,8 @@ struct CutEntry {
     hi: Vec3,
     area: f32,
     open: bool,
+    /// The batch's entry distance (≤ each ray's).
+    near: f32,
 }
 
 /// Reusable storage of [`SphereBvh::closest_hits_batch`] (one per thread).
@@ -348,8 +350,9 @@ impl SphereBvh {
                 *hit = self.traverse::<true>(stack, ray, *len, self.root);
                 continue;
             }
-            // The cut's entries this ray enters, nearest first: the nearest is visited now, the
-            // others stacked farthest first (as an inner node's children).
+            // The cut's entries this ray enters, in the cut's order (nearest first for the
+            // batch, about so for each ray; the order only steers pruning): the first is visited
+            // now, the others stacked last first.
             let mut order = [(0u32, 0f32); CUT_MAX];
             let mut k = 0;
             for (top, chunks) in scratch.tops.iter().zip(scratch.chunks.chunks(4)) {
@@ -362,13 +365,7 @@ impl SphereBvh {
                     while mask != 0 {
                         let lane = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        let item = (node.child[lane], entry[lane]);
-                        let mut j = k;
-                        while j > 0 && order[j - 1].1 > item.1 {
-                            order[j] = order[j - 1];
-                            j -= 1;
-                        }
-                        order[j] = item;
+                        order[k] = (node.child[lane], entry[lane]);
                         k += 1;
                     }
                 }
@@ -406,7 +403,7 @@ impl SphereBvh {
             origin = Some(ray.o);
         }
         let Some(o) = origin else { return false };
-        let test = |n: &Node4| -> u32 {
+        let test = |n: &Node4| -> (Vec4, u32) {
             let mut near = Vec4::splat(t_lo);
             let mut far = Vec4::splat(t_hi);
             for a in 0..3 {
@@ -423,12 +420,12 @@ impl SphereBvh {
                 near = near.max((a_near * l).min(a_near * h));
                 far = far.min((a_far * l).max(a_far * h));
             }
-            near.cmple(far * Vec4::splat(NONNEG_SLACK)).bitmask()
+            (near, near.cmple(far * Vec4::splat(NONNEG_SLACK)).bitmask())
         };
         // Greedy: open the entry with the largest box while the cut stays within `CUT_MAX`.
         let cut = &mut scratch.cut;
         cut.clear();
-        let push_kids = |cut: &mut Vec<CutEntry>, at: usize, n: &Node4, mut mask: u32| {
+        let push_kids = |cut: &mut Vec<CutEntry>, at: usize, n: &Node4, (near, mut mask): (Vec4, u32)| {
             let mut k = at;
             while mask != 0 {
                 let lane = mask.trailing_zeros() as usize;
@@ -439,8 +436,14 @@ impl SphereBvh {
                 let lo = Vec3::new(n.min[0][lane], n.min[1][lane], n.min[2][lane]);
                 let hi = Vec3::new(n.max[0][lane], n.max[1][lane], n.max[2][lane]);
                 let e = hi - lo;
-                let entry =
-                    CutEntry { child: n.child[lane], lo, hi, area: e.x * e.y + e.y * e.z + e.z * e.x, open: n.child[lane] & LEAF == 0 };
+                let entry = CutEntry {
+                    child: n.child[lane],
+                    lo,
+                    hi,
+                    area: e.x * e.y + e.y * e.z + e.z * e.x,
+                    open: n.child[lane] & LEAF == 0,
+                    near: near[lane],
+                };
                 cut.insert(k, entry);
                 k += 1;
             }
@@ -452,13 +455,16 @@ impl SphereBvh {
             let pick = (0..cut.len()).filter(|&i| cut[i].open).max_by(|&a, &b| cut[a].area.total_cmp(&cut[b].area));
             let Some(i) = pick else { break };
             let n = &self.nodes[cut[i].child as usize];
-            let mask = test(n);
-            if cut.len() - 1 + mask.count_ones() as usize > CUT_MAX {
+            let tested = test(n);
+            if cut.len() - 1 + tested.1.count_ones() as usize > CUT_MAX {
                 break;
             }
             cut.remove(i);
-            push_kids(cut, i, n, mask);
+            push_kids(cut, i, n, tested);
         }
+        // Nearest first by the batch's entry distance: each ray then finds the entries it enters
+        // in about its own near-to-far order without sorting them.
+        cut.sort_by(|a, b| a.near.total_cmp(&b.near));
         scratch.chunks.clear();
         for group in cut.chunks(4) {
             let mut node = Node4::EMPTY;
