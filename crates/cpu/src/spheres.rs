@@ -392,17 +392,16 @@ impl SphereBvh {
     /// ray gives it for the batch (rounding is monotone). Axes along which the directions change
     /// sign are left out of the batch's test (no constraint).
     fn batch_cut(&self, scratch: &mut BatchScratch) -> bool {
-        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        let (mut t_lo, mut t_hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        // Bounds of (1/d, t_min) and (1/d, t_max) as 4 lanes (no NaN here: usable rays only).
+        let (mut lo4, mut hi4) = (Vec4::INFINITY, Vec4::NEG_INFINITY);
         let mut origin = None;
         for (ray, _) in scratch.rays.iter().flatten().filter(|(r, _)| r.t_min >= 0.0) {
-            lo = lo.min(ray.inv);
-            hi = hi.max(ray.inv);
-            t_lo = t_lo.min(ray.t_min);
-            t_hi = t_hi.max(ray.t_max);
+            lo4 = lo4.min(ray.inv.extend(ray.t_min));
+            hi4 = hi4.max(ray.inv.extend(ray.t_max));
             origin = Some(ray.o);
         }
         let Some(o) = origin else { return false };
+        let (lo, hi, t_lo, t_hi) = (lo4.truncate(), hi4.truncate(), lo4.w, hi4.w);
         let test = |n: &Node4| -> (Vec4, u32) {
             let mut near = Vec4::splat(t_lo);
             let mut far = Vec4::splat(t_hi);
