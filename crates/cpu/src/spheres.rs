@@ -23,8 +23,9 @@
 //!   origin share the top of the tree. The batch's frustum, bounded by its rays' extreme inverse
 //!   directions, is tested against the nodes once, giving a cut of ≤ 32 subtrees that holds
 //!   everything any of its rays may enter (under two levels of 4-wide nodes of its own); each ray
-//!   starts from the cut (its entered subtrees nearest first) instead of the root. On the
-//!   1M-point tree scan at 1080p (16×16 tiles) the slab tests per frame fall from 14.1M to 6.1M.
+//!   starts from the cut (its entered subtrees, about nearest first) instead of the root. On the
+//!   1M-point tree scan at 1080p (8×8 tiles) the rays' slab tests per frame fall from 14.1M to
+//!   4.3M (1.6M tree nodes, 2.6M of the cuts' own nodes), plus 0.34M to build the 18,490 cuts.
 
 use glam::{Vec3, Vec4};
 
