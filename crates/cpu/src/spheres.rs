@@ -17,7 +17,15 @@
 //!   same operations in the same order as the scalar [`ray_sphere`], so bit for bit its results:
 //!   project the centre on the ray and compare the squared distance of the centre from the ray
 //!   with r². Ties in t go to the lower index, so
-//!   the result equals brute force whatever the traversal order.
+//!   the result equals brute force whatever the traversal order. Rays with `t_min ≥ 0` use a
+//!   cheaper slab test that enters every child the padded one enters ([`Ray::slab4`]).
+//! - **Batches** ([`SphereBvh::closest_hits_batch`], a screen tile's primary rays): rays from one
+//!   origin share the top of the tree. The batch's frustum, bounded by its rays' extreme inverse
+//!   directions, is tested against the nodes once, giving a cut of ≤ 32 subtrees that holds
+//!   everything any of its rays may enter (under two levels of 4-wide nodes of its own); each ray
+//!   starts from the cut (its entered subtrees, about nearest first) instead of the root. On the
+//!   1M-point tree scan at 1080p (8×8 tiles) the rays' slab tests per frame fall from 14.1M to
+//!   4.3M (1.6M tree nodes, 2.6M of the cuts' own nodes), plus 0.34M to build the 18,490 cuts.
 
 use glam::{Vec3, Vec4};
 
@@ -41,6 +49,42 @@ impl Default for TraversalStack {
         Self(Vec::with_capacity(STACK))
     }
 }
+/// Relative slack of the slab test for rays with `t_min ≥ 0` (see [`Ray::slab4`]).
+const NONNEG_SLACK: f32 = 1.0 + 3e-5;
+/// Most subtrees in a batch's cut ([`SphereBvh::closest_hits_batch`]).
+const CUT_MAX: usize = 32;
+
+/// One ray of a batch ([`SphereBvh::closest_hits_batch`]); the arguments of
+/// [`SphereBvh::closest_hit_slot_with`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatchRay {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub t_min: f32,
+    pub t_max: f32,
+}
+
+/// One subtree of a batch's cut: its reference, box and box area, and whether it is an inner node.
+#[derive(Debug, Clone, Copy)]
+struct CutEntry {
+    child: u32,
+    lo: Vec3,
+    hi: Vec3,
+    area: f32,
+    open: bool,
+    /// The batch's entry distance (≤ each ray's).
+    near: f32,
+}
+
+/// Reusable storage of [`SphereBvh::closest_hits_batch`] (one per thread).
+#[derive(Debug, Clone, Default)]
+pub struct BatchScratch {
+    rays: Vec<Option<(Ray, f32)>>,
+    cut: Vec<CutEntry>,
+    chunks: Vec<Node4>,
+    tops: Vec<Node4>,
+}
+
 /// Largest number of spheres (leaf starts have 27 bits).
 pub const MAX_SPHERES: usize = 1 << 27;
 
@@ -245,6 +289,21 @@ impl SphereBvh {
 
     /// As [`SphereBvh::closest_hit_slot`], reusing `stack` (one per thread saves its set-up per ray).
     pub fn closest_hit_slot_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
+        let (ray, len) = self.prepare(origin, dir, t_min, t_max)?;
+        // Entry distances are never negative when `t_min` is not: the cheaper slab form applies.
+        let stack = &mut stack.0;
+        stack.clear();
+        if ray.t_min >= 0.0 {
+            self.traverse::<true>(stack, &ray, len, self.root)
+        } else {
+            self.traverse::<false>(stack, &ray, len, self.root)
+        }
+    }
+
+    /// The ray of [`SphereBvh::closest_hit_slot_with`], prepared: `(ray, |dir|)`, or `None` when
+    /// it cannot hit anything (empty tree, unusable direction or range, or it misses the root box).
+    #[inline]
+    fn prepare(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(Ray, f32)> {
         if self.indices.is_empty() {
             return None;
         }
@@ -253,19 +312,195 @@ impl SphereBvh {
         if !usable {
             return None;
         }
-        let d = dir / len;
-        let ray = Ray::new(origin, d, t_min * len, t_max * len, self.radius);
+        // `dir / len` as one vector division (the same quotients as three scalar ones).
+        let ray = Ray::new(origin, (dir.extend(0.0) / len).truncate(), t_min * len, t_max * len, self.radius);
         // Cull against the root box first.
         let (e, x) = ray.slab(self.root_min, self.root_max);
-        if e > x {
-            return None;
+        if e > x { None } else { Some((ray, len)) }
+    }
+
+    /// [`SphereBvh::closest_hit_slot_with`] for a batch of rays (for instance one screen tile's
+    /// primary rays): `hits[i]` is exactly its result for `rays[i]`. When the rays share one
+    /// origin (bit for bit) and have `t_min ≥ 0`, the subtrees that any of them may enter are found
+    /// once for the batch (a cut of the tree under the batch's frustum, [`BatchScratch`]) and each
+    /// ray starts from them instead of the root, skipping the levels above.
+    pub fn closest_hits_batch(
+        &self,
+        scratch: &mut BatchScratch,
+        stack: &mut TraversalStack,
+        rays: &[BatchRay],
+        hits: &mut [Option<(f32, u32)>],
+    ) {
+        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
+        let prepared = &mut scratch.rays;
+        prepared.clear();
+        prepared.extend(rays.iter().map(|r| self.prepare(r.origin, r.dir, r.t_min, r.t_max)));
+        let shared = rays.first().map(|r| r.origin.to_array());
+        let cut = shared.is_some_and(|o| rays.iter().all(|r| r.origin.to_array() == o)) && self.root & LEAF == 0;
+        let cut = cut && self.batch_cut(scratch);
+        let stack = &mut stack.0;
+        for (p, hit) in scratch.rays.iter().zip(hits.iter_mut()) {
+            *hit = None;
+            let Some((ray, len)) = p else { continue };
+            stack.clear();
+            if ray.t_min < 0.0 {
+                *hit = self.traverse::<false>(stack, ray, *len, self.root);
+                continue;
+            }
+            if !cut {
+                *hit = self.traverse::<true>(stack, ray, *len, self.root);
+                continue;
+            }
+            // The cut's entries this ray enters, in the cut's order (nearest first for the
+            // batch, about so for each ray; the order only steers pruning): the first is visited
+            // now, the others stacked last first.
+            let mut order = [(0u32, 0f32); CUT_MAX];
+            let mut k = 0;
+            for (top, chunks) in scratch.tops.iter().zip(scratch.chunks.chunks(4)) {
+                let (_, mut chunk_mask) = ray.slab4::<true>(top, ray.t_max);
+                while chunk_mask != 0 {
+                    let node = &chunks[chunk_mask.trailing_zeros() as usize];
+                    chunk_mask &= chunk_mask - 1;
+                    let (entry, mut mask) = ray.slab4::<true>(node, ray.t_max);
+                    let entry = entry.to_array();
+                    while mask != 0 {
+                        let lane = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        order[k] = (node.child[lane], entry[lane]);
+                        k += 1;
+                    }
+                }
+            }
+            if k == 0 {
+                continue;
+            }
+            stack.extend(order[1..k].iter().rev());
+            *hit = self.traverse::<true>(stack, ray, *len, order[0].0);
         }
+    }
+
+    /// The cut of the tree for the prepared rays in `scratch` (those with `t_min ≥ 0`; all share
+    /// one origin): subtrees, at most `CUT_MAX`, such that any node or leaf one of these rays
+    /// enters (by [`Ray::slab4`]'s `NONNEG` test) on its way down from the root lies in one of them.
+    /// Stored as 4-wide nodes in `scratch.chunks` (their boxes as in their parents) under
+    /// 4-wide nodes in `scratch.tops` (one per four chunks); returns false when there is no ray to
+    /// trace (then the scratch is stale).
+    ///
+    /// The batch's test bounds each ray's: per axis (where all the rays' directions have one
+    /// sign) the slab plane distances `fl((p − o)·inv)` are monotone in `inv`, so they lie between
+    /// those at the batch's extreme `inv`; max and min keep the order, so each ray's `near` is ≥ the
+    /// batch's and its `far` (with `limit ≤ t_max`) ≤ the batch's, and `near ≤ fl(far·S)` for the
+    /// ray gives it for the batch (rounding is monotone). Axes along which the directions change
+    /// sign are left out of the batch's test (no constraint).
+    fn batch_cut(&self, scratch: &mut BatchScratch) -> bool {
+        // Bounds of (1/d, t_min) and (1/d, t_max) as 4 lanes (no NaN here: usable rays only).
+        let (mut lo4, mut hi4) = (Vec4::INFINITY, Vec4::NEG_INFINITY);
+        let mut origin = None;
+        for (ray, _) in scratch.rays.iter().flatten().filter(|(r, _)| r.t_min >= 0.0) {
+            lo4 = lo4.min(ray.inv.extend(ray.t_min));
+            hi4 = hi4.max(ray.inv.extend(ray.t_max));
+            origin = Some(ray.o);
+        }
+        let Some(o) = origin else { return false };
+        let (lo, hi, t_lo, t_hi) = (lo4.truncate(), hi4.truncate(), lo4.w, hi4.w);
+        let test = |n: &Node4| -> (Vec4, u32) {
+            let mut near = Vec4::splat(t_lo);
+            let mut far = Vec4::splat(t_hi);
+            for a in 0..3 {
+                let (l, h) = (Vec4::splat(lo[a]), Vec4::splat(hi[a]));
+                let oa = Vec4::splat(o[a]);
+                let (p_near, p_far) = if lo[a] > 0.0 {
+                    (n.min[a], n.max[a])
+                } else if hi[a] < 0.0 {
+                    (n.max[a], n.min[a])
+                } else {
+                    continue;
+                };
+                let (a_near, a_far) = (p_near - oa, p_far - oa);
+                near = near.max((a_near * l).min(a_near * h));
+                far = far.min((a_far * l).max(a_far * h));
+            }
+            (near, near.cmple(far * Vec4::splat(NONNEG_SLACK)).bitmask())
+        };
+        // Greedy: open the entry with the largest box while the cut stays within `CUT_MAX`.
+        let cut = &mut scratch.cut;
+        cut.clear();
+        let push_kids = |cut: &mut Vec<CutEntry>, at: usize, n: &Node4, (near, mut mask): (Vec4, u32)| {
+            let mut k = at;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                if n.child[lane] == LEAF {
+                    continue;
+                }
+                let lo = Vec3::new(n.min[0][lane], n.min[1][lane], n.min[2][lane]);
+                let hi = Vec3::new(n.max[0][lane], n.max[1][lane], n.max[2][lane]);
+                let e = hi - lo;
+                let entry = CutEntry {
+                    child: n.child[lane],
+                    lo,
+                    hi,
+                    area: e.x * e.y + e.y * e.z + e.z * e.x,
+                    open: n.child[lane] & LEAF == 0,
+                    near: near[lane],
+                };
+                cut.insert(k, entry);
+                k += 1;
+            }
+        };
+        let root = &self.nodes[self.root as usize];
+        push_kids(cut, 0, root, test(root));
+        // Stop at the first entry that does not fit (each try costs a node fetch).
+        loop {
+            let pick = (0..cut.len()).filter(|&i| cut[i].open).max_by(|&a, &b| cut[a].area.total_cmp(&cut[b].area));
+            let Some(i) = pick else { break };
+            let n = &self.nodes[cut[i].child as usize];
+            let tested = test(n);
+            if cut.len() - 1 + tested.1.count_ones() as usize > CUT_MAX {
+                break;
+            }
+            cut.remove(i);
+            push_kids(cut, i, n, tested);
+        }
+        // Nearest first by the batch's entry distance: each ray then finds the entries it enters
+        // in about its own near-to-far order without sorting them.
+        cut.sort_by(|a, b| a.near.total_cmp(&b.near));
+        scratch.chunks.clear();
+        for group in cut.chunks(4) {
+            let mut node = Node4::EMPTY;
+            for (lane, c) in group.iter().enumerate() {
+                node.child[lane] = c.child;
+                for a in 0..3 {
+                    node.min[a][lane] = c.lo[a];
+                    node.max[a][lane] = c.hi[a];
+                }
+            }
+            scratch.chunks.push(node);
+        }
+        // Two levels: the chunks, then 4-wide nodes over the chunks' bounding boxes (a ray that
+        // enters a box enters any box holding it: the slab distances are monotone in the planes).
+        scratch.tops.clear();
+        for group in scratch.chunks.chunks(4) {
+            let mut top = Node4::EMPTY;
+            for (lane, c) in group.iter().enumerate() {
+                for a in 0..3 {
+                    top.min[a][lane] = c.min[a].min_element();
+                    top.max[a][lane] = c.max[a].max_element();
+                }
+            }
+            scratch.tops.push(top);
+        }
+        true
+    }
+
+    /// Ordered depth-first traversal from the subtree `root`, then the subtrees on `stack`
+    /// (see the module notes). `NONNEG`: the ray's `t_min` is ≥ 0 (see [`Ray::slab4`]).
+    #[inline]
+    fn traverse<const NONNEG: bool>(&self, stack: &mut Vec<(u32, f32)>, ray: &Ray, len: f32, root: u32) -> Option<(f32, u32)> {
         let mut best_t = ray.t_max;
         let mut best = u32::MAX;
         let mut best_slot = 0u32;
-        let stack = &mut stack.0;
-        stack.clear();
-        let mut cur = self.root;
+        let mut cur = root;
         loop {
             if cur & LEAF != 0 {
                 let start = ((cur & !LEAF) >> 4) as usize;
@@ -287,7 +522,7 @@ impl SphereBvh {
                 }
             } else {
                 let n = &self.nodes[cur as usize];
-                let (entry, mut mask) = ray.slab4(n, best_t);
+                let (entry, mut mask) = ray.slab4::<NONNEG>(n, best_t);
                 if mask != 0 {
                     let first = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -325,7 +560,7 @@ impl SphereBvh {
                 let Some((r, e)) = stack.pop() else {
                     return if best == u32::MAX { None } else { Some((best_t / len, best_slot)) };
                 };
-                if e <= best_t {
+                if Ray::may_enter::<NONNEG>(e, best_t) {
                     cur = r;
                     break;
                 }
@@ -375,6 +610,7 @@ pub fn closest_hit_brute_force(centers: &[Vec3], radius: f32, origin: Vec3, dir:
 }
 
 /// A ray prepared for traversal (unit direction).
+#[derive(Debug, Clone, Copy)]
 struct Ray {
     o: Vec3,
     d: Vec3,
@@ -387,16 +623,30 @@ struct Ray {
 impl Ray {
     #[inline]
     fn new(o: Vec3, d: Vec3, t_min: f32, t_max: f32, r: f32) -> Self {
-        // A finite stand-in for 1/0 keeps 0·(1/d) from becoming NaN when the origin lies on a slab plane.
-        let safe = |c: f32| if c.abs() < 1e-30 { 1e30f32.copysign(c) } else { 1.0 / c };
-        let inv = Vec3::new(safe(d.x), safe(d.y), safe(d.z));
+        // A finite stand-in for 1/0 keeps 0·(1/d) from becoming NaN when the origin lies on a slab
+        // plane. One vector division: each lane is the scalar `1.0 / c`, bit for bit.
+        let d4 = d.extend(1.0);
+        let tiny = d4.abs().cmplt(Vec4::splat(1e-30));
+        let inv = Vec4::select(tiny, Vec4::splat(1e30).copysign(d4), Vec4::ONE / d4).truncate();
         Self { o, d, inv, t_min, t_max, r }
     }
 
-    /// All four children's slab tests at once: the padded entry distances (as [`Ray::slab`]) and
-    /// the bit mask of the children entered within `[t_min, limit]`.
+    /// All four children's slab tests at once: their entry distances and the bit mask of the
+    /// children entered within `[t_min, limit]`.
+    ///
+    /// `NONNEG = false` (any `t_min`): the entry distances are padded, `e = near − |near|·10⁻⁵`,
+    /// `x = far + |far|·10⁻⁵` (this relative slack covers the rounding of the box and of the slab
+    /// planes), and a child is entered when `e ≤ x` and `e ≤ limit`.
+    ///
+    /// `NONNEG = true` (`t_min ≥ 0`, so `near ≥ 0`): the same children and more, in fewer
+    /// operations: entered when `near ≤ far·(1 + 3·10⁻⁵)`, the unpadded `near` returned. Whenever
+    /// the padded test passes, `near·(1 − 10⁻⁵) ≤ far·(1 + 10⁻⁵)` up to two roundings (relative
+    /// 2⁻²⁴ each), so `near ≤ far·(1 + 2.1·10⁻⁵)` (and `far ≤ limit`, `e ≤ limit` are covered by
+    /// `far = min(…, limit)`); when `far < 0` the padded test fails (`x < 0 ≤ e`) whatever this one
+    /// says. Hence no child, and so no sphere, is ever culled that the padded test would enter;
+    /// [`Ray::may_enter`] likewise for the stacked entries.
     #[inline]
-    fn slab4(&self, n: &Node4, limit: f32) -> (Vec4, u32) {
+    fn slab4<const NONNEG: bool>(&self, n: &Node4, limit: f32) -> (Vec4, u32) {
         // For a negative direction the max plane is entered first.
         let axis = |a: usize| {
             let o = Vec4::splat(self.o[a]);
@@ -411,11 +661,22 @@ impl Ray {
         let limit = Vec4::splat(limit);
         let near = nx.max(ny).max(nz).max(Vec4::splat(self.t_min));
         let far = fx.min(fy).min(fz).min(limit);
-        // 1e-5 relative slack covers the rounding of the box and of the slab planes. Empty slots
-        // give NaN here and fail both comparisons.
+        if NONNEG {
+            // Empty slots give near = +∞, far = −∞ here and fail.
+            return (near, near.cmple(far * Vec4::splat(NONNEG_SLACK)).bitmask());
+        }
+        // Empty slots give NaN here and fail both comparisons.
         let e = near - near.abs() * 1e-5;
         let x = far + far.abs() * 1e-5;
         (e, (e.cmple(x) & e.cmple(limit)).bitmask())
+    }
+
+    /// Whether a stacked child with entry distance `e` (from [`Ray::slab4`]) may still hold a hit
+    /// at `t ≤ best_t`: `e ≤ best_t`, or for `NONNEG` (unpadded `e = near ≥ 0`) the looser
+    /// `near ≤ best_t·(1 + 3·10⁻⁵)`, which holds whenever `near·(1 − 10⁻⁵) ≤ best_t` does.
+    #[inline]
+    fn may_enter<const NONNEG: bool>(e: f32, best_t: f32) -> bool {
+        if NONNEG { e <= best_t * NONNEG_SLACK } else { e <= best_t }
     }
 
     /// Entry and exit parameters of the box (entry > exit: miss), clipped to `[t_min, t_max]`.
@@ -778,6 +1039,73 @@ mod tests {
         assert_eq!(bvh.closest_hit(Vec3::ZERO, Vec3::Z * 2.0, 0.0, 10.0), Some((1.25, 0)));
         assert!(matches!(SphereBvh::build(&same, 0.0), Err(SphereBvhError::BadRadius(_))));
         assert!(matches!(SphereBvh::build(&[Vec3::NAN], 1.0), Err(SphereBvhError::NonFiniteCenter(0))));
+    }
+
+    /// Batches (one origin, narrow to wide cones, directions with zero components, negative
+    /// `t_min`, varied `t_max`, a stray origin) give exactly the single-ray results and brute
+    /// force's, ties (duplicated centres) included.
+    #[test]
+    fn batch_equals_single_rays_and_brute_force() {
+        use rand::rngs::StdRng;
+        use rand::{Rng, SeedableRng};
+        let mut rng = StdRng::seed_from_u64(7);
+        // A blob, a thin shell and a far cluster; the first 400 centres come in equal pairs.
+        let mut centers: Vec<Vec3> = (0..4000)
+            .map(|i| match i % 3 {
+                0 => Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)),
+                1 => {
+                    Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize_or(Vec3::X)
+                        * 3.0
+                }
+                _ => Vec3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), 40.0 + rng.random_range(-0.5..0.5)),
+            })
+            .collect();
+        for i in 0..200 {
+            centers[2 * i + 1] = centers[2 * i];
+        }
+        let radius = 0.04;
+        let bvh = SphereBvh::build(&centers, radius).unwrap();
+        let mut scratch = BatchScratch::default();
+        let mut stack = TraversalStack::default();
+        let (mut hits, mut ties, mut cuts) = (0, 0, 0);
+        for b in 0..90 {
+            let origin = Vec3::new(rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0), rng.random_range(-8.0..-4.0));
+            let origin = if b % 9 == 4 { Vec3::new(0.1, 0.2, 0.3) } else { origin };
+            let aim = (centers[rng.random_range(0..400)] - origin).normalize();
+            let spread = [0.003, 0.03, 0.3, 2.0][b % 4];
+            let rays: Vec<BatchRay> = (0..64)
+                .map(|j| {
+                    let mut dir =
+                        aim + Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * spread;
+                    if j % 11 == 3 {
+                        dir.x = 0.0;
+                    }
+                    if j % 13 == 5 {
+                        dir = Vec3::new(0.0, -0.0, 1.0);
+                    }
+                    let dir = dir * rng.random_range(0.5..2.0);
+                    let (t_min, t_max) = match j % 5 {
+                        0 => (0.0, f32::INFINITY),
+                        1 => (rng.random_range(0.0..3.0), rng.random_range(3.0..12.0)),
+                        2 if b % 3 == 0 => (-2.0, f32::INFINITY),
+                        _ => (rng.random_range(0.0..0.5), rng.random_range(2.0..60.0)),
+                    };
+                    let origin = if b % 10 == 7 && j == 9 { origin + Vec3::new(1e-3, 0.0, 0.0) } else { origin };
+                    BatchRay { origin, dir, t_min, t_max }
+                })
+                .collect();
+            let mut got = vec![None; rays.len()];
+            bvh.closest_hits_batch(&mut scratch, &mut stack, &rays, &mut got);
+            cuts += (b % 10 != 7 && !scratch.chunks.is_empty()) as usize;
+            for (k, (r, h)) in rays.iter().zip(&got).enumerate() {
+                assert_eq!(*h, bvh.closest_hit_slot(r.origin, r.dir, r.t_min, r.t_max), "batch {b} ray {k}");
+                let want = closest_hit_brute_force(&centers, radius, r.origin, r.dir, r.t_min, r.t_max);
+                assert_eq!(h.map(|(t, s)| (t, bvh.index_of_slot(s))), want, "batch {b} ray {k}");
+                hits += h.is_some() as usize;
+                ties += want.is_some_and(|(_, i)| i < 400 && i % 2 == 0) as usize;
+            }
+        }
+        assert!(hits > 1500 && ties > 200 && cuts > 50, "too little tested: {hits} hits, {ties} ties, {cuts} cuts");
     }
 
     #[test]
