@@ -21,7 +21,7 @@ use hybrid_core::depth_merge::{
     MISS_TEXEL, PackedRtFrame, encode_hit, synthesize_depth, synthesize_depth_orthographic, view_z_from_depth,
     view_z_from_depth_orthographic,
 };
-use hybrid_core::shading::local_lighting;
+use hybrid_core::shading::FrameLights;
 use hybrid_scene::texture::srgb_to_linear;
 use hybrid_scene::{Camera, Environment, Lights, PointCloud, PointColoring};
 use rayon::prelude::*;
@@ -325,8 +325,9 @@ thread_local! {
 /// scene's lights and ambient, packed with their synthesized depth.
 pub struct PointCloudCapsule {
     clouds: Vec<Cloud>,
-    lights: Lights,
-    env: Environment,
+    /// The scene's lights and ambient, with their per-frame constants (as `local_lighting`, bit
+    /// for bit).
+    lights: FrameLights,
     build_ms: f64,
     points: u64,
 }
@@ -354,7 +355,7 @@ impl PointCloudCapsule {
             built.push(Cloud { bvh, color, specular: pc.specular, shininess: pc.shininess });
         }
         let points = clouds.iter().map(|c| c.points.len() as u64).sum();
-        Ok(Self { clouds: built, lights, env, build_ms: start.elapsed().as_secs_f64() * 1e3, points })
+        Ok(Self { clouds: built, lights: FrameLights::new(&lights, &env), build_ms: start.elapsed().as_secs_f64() * 1e3, points })
     }
 
     /// Bytes of the BVHs, sphere centres and colours.
@@ -449,7 +450,7 @@ impl PointCloudCapsule {
     /// The shaded colour of sphere `slot` of cloud `ci` hit at `t` along `ray`.
     fn shade_hit(&self, ray: &PrimaryRay, t: f32, ci: usize, slot: u32) -> Vec3 {
         let s = self.sphere_surface(ci, slot, ray.origin + ray.dir * t, ray.dir);
-        local_lighting(&s, -ray.dir, &self.lights, &self.env)
+        self.lights.local_lighting(&s, -ray.dir)
     }
 }
 
