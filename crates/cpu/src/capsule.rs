@@ -226,14 +226,33 @@ impl RayGen {
 
     #[inline]
     pub fn ray(&self, col: u32, row: u32) -> PrimaryRay {
+        self.ray_at(self.view_x(col), self.view_y(row))
+    }
+
+    /// The view-plane x of column `col`'s centre (`x_ndc / P₀₀`); depends on the column only, so
+    /// a frame computes it once per column for [`RayGen::ray_at`].
+    #[inline]
+    pub fn view_x(&self, col: u32) -> f32 {
         let x = 2.0 * (col as f32 + 0.5) / self.width - 1.0;
+        x / self.sx
+    }
+
+    /// The view-plane y of row `row`'s centre (`y_ndc / P₁₁`), as [`RayGen::view_x`].
+    #[inline]
+    pub fn view_y(&self, row: u32) -> f32 {
         let y = 1.0 - 2.0 * (row as f32 + 0.5) / self.height;
+        y / self.sy
+    }
+
+    /// The ray through view-plane point (`view_x(col)`, `view_y(row)`): `ray(col, row)`, bit for bit.
+    #[inline]
+    pub fn ray_at(&self, vx: f32, vy: f32) -> PrimaryRay {
         if self.ortho {
-            let origin = self.eye + self.view_inv.transform_vector3(Vec3::new(x / self.sx, y / self.sy, 0.0));
+            let origin = self.eye + self.view_inv.transform_vector3(Vec3::new(vx, vy, 0.0));
             let dir = self.view_inv.transform_vector3(Vec3::NEG_Z).normalize();
             PrimaryRay { origin, dir, dir_view_z: -1.0, t_min: self.near, t_max: self.far }
         } else {
-            let dv = Vec3::new(x / self.sx, y / self.sy, -1.0).normalize();
+            let dv = Vec3::new(vx, vy, -1.0).normalize();
             let dir = self.view_inv.transform_vector3(dv);
             let origin = self.eye;
             PrimaryRay { origin, dir, dir_view_z: dv.z, t_min: self.near / -dv.z, t_max: self.far / -dv.z }
@@ -479,6 +498,9 @@ impl RtCapsule for PointCloudCapsule {
             const BAND: usize = 16;
             const TILE: usize = 8;
             let wu = w as usize;
+            // Each pixel's ray is `raygen.ray(col, row)`; the per-column and per-row halves once.
+            let view_x: Vec<f32> = (0..w).map(|c| raygen.view_x(c)).collect();
+            let view_x = &view_x;
             out.texels
                 .par_chunks_mut(wu * BAND)
                 .with_max_len(1)
@@ -492,6 +514,7 @@ impl RtCapsule for PointCloudCapsule {
                     let mut found = Vec::with_capacity(TILE * TILE);
                     let mut best = Vec::with_capacity(TILE * TILE);
                     let rows = texels.len() / wu;
+                    let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((band * BAND + r) as u32)).collect();
                     for (row0, col0) in (0..rows).step_by(TILE).flat_map(|r| (0..wu).step_by(TILE).map(move |c| (r, c))) {
                         let cols = col0..(col0 + TILE).min(wu);
                         let tile_rows = row0..(row0 + TILE).min(rows);
@@ -500,7 +523,7 @@ impl RtCapsule for PointCloudCapsule {
                         for r in tile_rows.clone() {
                             let row = band * BAND + r;
                             for col in cols.clone() {
-                                let ray = raygen.ray(col as u32, row as u32);
+                                let ray = raygen.ray_at(view_x[col], view_y[r]);
                                 let mut t_max = ray.t_max;
                                 if let Some(c) = clip {
                                     let z = c[row * wu + col];
