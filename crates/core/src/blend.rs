@@ -41,7 +41,8 @@ pub fn blend_pixel(lighting: Vec3, shadow: Vec3, reflection: Vec3, refraction: V
 /// [`encode_srgb_channel`].
 #[inline]
 pub fn encode_srgb(c: Vec3) -> [u8; 4] {
-    [encode_srgb_channel(c.x), encode_srgb_channel(c.y), encode_srgb_channel(c.z), 255]
+    let t = srgb_encode_tables();
+    [t.encode(c.x), t.encode(c.y), t.encode(c.z), 255]
 }
 
 /// The definition of one [`encode_srgb`] channel, with a `powf` per call.
@@ -52,8 +53,9 @@ fn encode_srgb_channel_reference(v: f32) -> u8 {
 
 /// Tables that give [`encode_srgb_channel_reference`] without `powf`.
 struct SrgbEncodeTables {
-    /// `first[k]`: bits of the smallest f32 in (0, 1) whose code is ≥ k (`first[0]` unused).
-    first: [u32; 256],
+    /// `first[k]`: bits of the smallest f32 in (0, 1) whose code is ≥ k (`first[0]` unused,
+    /// `first[256]` = `u32::MAX`).
+    first: [u32; 257],
     /// Code of the smallest f32 of each bucket of 2¹⁶ bit patterns (`bits >> 16`) below 1.0.
     bucket: Vec<u8>,
 }
@@ -66,6 +68,9 @@ fn srgb_encode_tables() -> &'static SrgbEncodeTables {
         // The code never decreases as the value grows (tested over all of [0, 1]), so each
         // threshold is found by bisection over the bit patterns (positive floats order as their bits).
         let first = std::array::from_fn(|k| {
+            if k == 256 {
+                return u32::MAX;
+            }
             let (mut lo, mut hi) = (0u32, one);
             while lo < hi {
                 let mid = lo + (hi - lo) / 2;
@@ -80,24 +85,31 @@ fn srgb_encode_tables() -> &'static SrgbEncodeTables {
 
 /// One channel of [`encode_srgb`]: exactly `(linear_to_srgb(v) · 255 + 0.5) as u8` (non-finite
 /// values as 0), without its `powf`: a table gives the code at the start of the value's bucket of
-/// 2¹⁶ float bit patterns and at most a step or two up the 255 exact thresholds finishes it. The
-/// blend stage encodes every pixel, and `powf` was most of its time.
+/// 2¹⁶ float bit patterns, and one comparison with the next exact threshold finishes it (no
+/// bucket spans two thresholds: the test over every f32 of [0, 1] would fail). The blend stage
+/// encodes every pixel, and `powf` was most of its time.
 #[inline]
 pub fn encode_srgb_channel(v: f32) -> u8 {
-    if v.is_nan() || v <= 0.0 || v.is_infinite() {
-        // NaN, negative, zero and ±infinity (non-finite values count as 0).
-        return 0;
+    srgb_encode_tables().encode(v)
+}
+
+impl SrgbEncodeTables {
+    /// [`encode_srgb_channel`], on the bits: positive floats order as their bits.
+    #[inline]
+    fn encode(&self, v: f32) -> u8 {
+        const ONE: u32 = 0x3F80_0000;
+        const INFINITY: u32 = 0x7F80_0000;
+        let bits = v.to_bits();
+        if bits as i32 <= 0 || bits >= INFINITY {
+            // Zero, negative (the sign bit set), +infinity and NaN: non-finite values count as 0.
+            0
+        } else if bits >= ONE {
+            255
+        } else {
+            let k = self.bucket[(bits >> 16) as usize];
+            k + (bits >= self.first[k as usize + 1]) as u8
+        }
     }
-    if v >= 1.0 {
-        return 255;
-    }
-    let t = srgb_encode_tables();
-    let bits = v.to_bits();
-    let mut k = t.bucket[(bits >> 16) as usize];
-    while k < 255 && bits >= t.first[k as usize + 1] {
-        k += 1;
-    }
-    k
 }
 
 #[cfg(test)]
