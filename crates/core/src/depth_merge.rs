@@ -11,7 +11,9 @@
 //! [`pack_unorm4x8`] does: `floor(0.5 + 255·clamp(c, 0, 1))`).
 
 use glam::Vec3;
-use hybrid_scene::texture::{linear_to_srgb, srgb_byte_to_linear};
+use hybrid_scene::texture::srgb_byte_to_linear;
+
+use crate::blend::encode_srgb_channel;
 use serde::Serialize;
 
 use crate::buffers::RtLayer;
@@ -63,8 +65,15 @@ pub fn unpack_texel(t: [u16; 4]) -> ([u8; 4], f32) {
 /// alpha 1, with the reversed-Z depth.
 #[inline]
 pub fn encode_hit(linear: Vec3, depth: f32) -> [u16; 4] {
-    let a = pack_unorm4x8([linear_to_srgb(linear.x), linear_to_srgb(linear.y), linear_to_srgb(linear.z), 1.0]);
-    pack_texel(a.to_le_bytes(), depth)
+    pack_texel([srgb_unorm8(linear.x), srgb_unorm8(linear.y), srgb_unorm8(linear.z), 255], depth)
+}
+
+/// One colour byte of [`encode_hit`]: `packUnorm4x8`'s `⌊0.5 + 255·linear_to_srgb(v)⌋`, which for
+/// every finite or NaN `v` is the blend's [`encode_srgb_channel`] (the same operations), taken from
+/// its exact tables instead of a `powf`; +infinity clamps to 255 here (the blend counts it as 0).
+#[inline]
+fn srgb_unorm8(v: f32) -> u8 {
+    if v == f32::INFINITY { 255 } else { encode_srgb_channel(v) }
 }
 
 /// The texel of a pixel whose ray hit nothing: all zero (alpha 0 → discarded).
@@ -187,6 +196,24 @@ pub struct CapsuleStats {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hit_colour_bytes_equal_pack_unorm4x8_of_srgb() {
+        let definition = |v: f32| {
+            let s = hybrid_scene::texture::linear_to_srgb(v);
+            pack_unorm4x8([s, s, s, 1.0]).to_le_bytes()
+        };
+        let check = |v: f32| {
+            let got = unpack_texel(encode_hit(Vec3::splat(v), 0.5)).0;
+            assert_eq!(got, definition(v), "{v:e} ({:#x})", v.to_bits());
+        };
+        // Every 7th bit pattern of [0, 1] (150 million values; the blend's tables are tested on
+        // all of them), and the values outside.
+        (0..=1.0f32.to_bits()).step_by(7).for_each(|b| check(f32::from_bits(b)));
+        for v in [-0.0, -1.0, 1.5, 1e30, f32::MAX, f32::NAN, -f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.003_130_8] {
+            check(v);
+        }
+    }
 
     #[test]
     fn pack_unorm_rounds_to_nearest_and_clamps() {
