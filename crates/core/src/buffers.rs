@@ -118,7 +118,8 @@ impl GBuffer {
 
 /// Stage outputs after the G-buffer: the P-buffer (lighting), the trace stage's three buffers
 /// (paper Fig. 5) and the final image.
-#[derive(Debug, Clone, PartialEq)]
+/// `Default` is the empty 0×0 set (for a frame loop to fill).
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct FrameBuffers {
     pub width: u32,
     pub height: u32,

@@ -89,15 +89,7 @@ impl<'s> CpuRenderer<'s> {
         let mut t = StageTimings::default();
         let mode = settings.mode;
 
-        let mut buffers = self.spare_buffers.take().unwrap_or_else(|| FrameBuffers {
-            width: 0,
-            height: 0,
-            lighting: Vec::new(),
-            shadow: Vec::new(),
-            reflection: Vec::new(),
-            refraction: Vec::new(),
-            final_srgb: Vec::new(),
-        });
+        let mut buffers = self.spare_buffers.take().unwrap_or_default();
         (buffers.width, buffers.height) = (settings.width, settings.height);
 
         let (mut gbuffer, primary_rays, rt_packed, capsule_report) = if self.clip_capsule_at_raster_depth {
@@ -172,8 +164,8 @@ impl<'s> CpuRenderer<'s> {
         let request = CapsuleRequest { camera: *camera, width: settings.width, height: settings.height, clip_depth };
         let stats = capsule.render(&request, &mut packed);
         let unpack_start = Instant::now();
-        // Block U, in parallel runs of rows (each texel is independent).
-        // Every texel is written, so last frame's layer of the same size needs no clearing.
+        // Block U, in parallel runs of texels (each is independent). Every texel is written, so
+        // last frame's layer of the same size needs no clearing.
         let mut layer = self
             .spare_rt_layer
             .take()
