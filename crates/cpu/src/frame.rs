@@ -195,7 +195,8 @@ impl<'s> CpuRenderer<'s> {
     fn geometry_stage(&mut self, camera: &Camera, settings: FrameSettings, rt_layer: Option<&RtLayer>) -> (GBuffer, u64) {
         let (w, h) = (settings.width, settings.height);
         if settings.mode == Mode::RtOnly {
-            let mut g = trace::rt_only_gbuffer(&self.prepared, &self.bvh, camera, w, h);
+            let mut g = self.spare_gbuffer.take().filter(|g| g.width == w && g.height == h).unwrap_or_else(|| GBuffer::new(w, h));
+            trace::rt_only_gbuffer_into(&self.prepared, &self.bvh, camera, &mut g);
             if let Some(layer) = rt_layer {
                 raster::merge_rt_layer(&mut g, layer, camera);
             }

@@ -622,7 +622,7 @@ fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mu
 }
 
 /// One band's rows of every G-buffer target (the band's slices of the frame's vectors).
-struct BandRows<'a> {
+pub(crate) struct BandRows<'a> {
     position: &'a mut [Vec3],
     normal: &'a mut [Vec3],
     emission: &'a mut [Vec3],
@@ -636,9 +636,18 @@ struct BandRows<'a> {
 }
 
 impl BandRows<'_> {
+    /// Pixels in the band.
+    pub(crate) fn len(&self) -> usize {
+        self.depth.len()
+    }
+
+    pub(crate) fn set_mask(&mut self, i: usize, mask: f32) {
+        self.mask[i] = mask;
+    }
+
     /// Exactly what [`GBuffer::write`] does, for a band's slices (a test checks they agree).
     #[inline(always)]
-    fn write(&mut self, i: usize, object_id: u32, depth: f32, s: &Surface) {
+    pub(crate) fn write(&mut self, i: usize, object_id: u32, depth: f32, s: &Surface) {
         self.position[i] = s.position;
         self.normal[i] = s.normal;
         self.emission[i] = s.emission;
@@ -652,7 +661,7 @@ impl BandRows<'_> {
 
     /// What [`GBuffer::new`] holds in a pixel (a test checks they agree).
     #[inline]
-    fn clear(&mut self, i: usize) {
+    pub(crate) fn clear(&mut self, i: usize) {
         self.position[i] = Vec3::ZERO;
         self.normal[i] = Vec3::ZERO;
         self.emission[i] = Vec3::ZERO;
@@ -666,7 +675,9 @@ impl BandRows<'_> {
     }
 }
 
-fn split_bands(g: &mut GBuffer, band_len: usize) -> Vec<BandRows<'_>> {
+/// The G-buffer's targets cut into runs of `band_len` pixels, one [`BandRows`] each, to be
+/// written in parallel.
+pub(crate) fn split_bands(g: &mut GBuffer, band_len: usize) -> Vec<BandRows<'_>> {
     let mut position = g.position.chunks_mut(band_len);
     let mut normal = g.normal.chunks_mut(band_len);
     let mut emission = g.emission.chunks_mut(band_len);

@@ -37,6 +37,7 @@ use rayon::prelude::*;
 use crate::bvh::{SceneBvh, ShadowCache};
 use crate::capsule::PointCloudCapsule;
 use crate::prepare::PreparedScene;
+use crate::raster::split_bands;
 
 pub use hybrid_core::report::RayCounts;
 
@@ -318,34 +319,43 @@ pub fn primary_ray_count(width: u32, height: u32) -> u64 {
 /// [`primary_ray_count`].
 pub fn rt_only_gbuffer(prepared: &PreparedScene, bvh: &SceneBvh, camera: &Camera, width: u32, height: u32) -> GBuffer {
     let mut g = GBuffer::new(width, height);
+    rt_only_gbuffer_into(prepared, bvh, camera, &mut g);
+    g
+}
+
+/// [`rt_only_gbuffer`] into an existing G-buffer (its size is the frame size): every pixel of
+/// every target is overwritten (uncovered pixels as [`GBuffer::new`] holds them), so a buffer can
+/// be reused frame after frame. Rows are traced and written in parallel bands.
+pub fn rt_only_gbuffer_into(prepared: &PreparedScene, bvh: &SceneBvh, camera: &Camera, g: &mut GBuffer) {
+    let (width, height) = (g.width, g.height);
     if width == 0 || height == 0 {
-        return g;
+        return;
     }
     let rays = PrimaryRays::new(camera, width, height);
     let vp = camera.view_projection(width as f32 / height as f32);
-    let hits: Vec<Option<(u32, f32, Surface)>> = (0..g.len())
-        .into_par_iter()
-        .with_min_len(CHUNK)
-        .map(|i| {
+    let band_len = width as usize * PRIMARY_BAND_ROWS;
+    split_bands(g, band_len).into_par_iter().enumerate().with_max_len(1).for_each(|(band, mut rows)| {
+        for k in 0..rows.len() {
+            let i = band * band_len + k;
             let (x, y) = ((i % width as usize) as u32, (i / width as usize) as u32);
             let (origin, dir, t_max) = rays.ray(x, y);
-            let hit = bvh.closest_hit(origin, dir, 0.0, t_max)?;
+            let Some(hit) = bvh.closest_hit(origin, dir, 0.0, t_max) else {
+                rows.clear(k);
+                continue;
+            };
             let point = origin + dir * hit.t;
             let footprint = uv_footprint(prepared, hit.triangle, dir, rays.pixel_world_size(point));
             let s = prepared.surface_at(hit.triangle, hit.bary, footprint);
             let object = prepared.meshes[hit.triangle.mesh as usize].object;
             let depth = vp.project_point3(s.position).z.clamp(0.0, 1.0);
-            Some((object, depth, s))
-        })
-        .collect();
-    for (i, h) in hits.into_iter().enumerate() {
-        if let Some((object, depth, s)) = h {
-            g.write(i, object, depth, &s);
-            g.mask[i] = 1.0;
+            rows.write(k, object, depth, &s);
+            rows.set_mask(k, 1.0);
         }
-    }
-    g
+    });
 }
+
+/// Rows per parallel work item of [`rt_only_gbuffer_into`].
+const PRIMARY_BAND_ROWS: usize = 4;
 
 /// UV change per pixel on a triangle seen along `dir` with pixel size `world` at the hit:
 /// the pixel's footprint (stretched by the viewing angle, as the raster's larger screen

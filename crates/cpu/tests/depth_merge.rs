@@ -120,7 +120,14 @@ fn recycled_frames_give_identical_buffers() {
     let camera = scene.camera_path.as_ref().unwrap().camera_at(&scene.camera, 10.0);
     let mut reusing = CpuRenderer::new(&scene).unwrap();
     let mut fresh = CpuRenderer::new(&scene).unwrap();
-    let frames = [(Mode::All, 96, 54, false), (Mode::Raster, 64, 40, false), (Mode::All, 64, 40, true), (Mode::RtOnly, 96, 54, false)];
+    let frames = [
+        (Mode::All, 96, 54, false),
+        (Mode::Raster, 64, 40, false),
+        (Mode::All, 64, 40, true),
+        (Mode::RtOnly, 64, 40, false),
+        (Mode::RtOnly, 96, 54, false),
+        (Mode::All, 96, 54, false),
+    ];
     for (mode, width, height, clip) in frames {
         let settings = FrameSettings { width, height, mode };
         reusing.clip_capsule_at_raster_depth = clip;
