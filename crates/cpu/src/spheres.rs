@@ -70,8 +70,8 @@ struct CutEntry {
     child: u32,
     lo: Vec3,
     hi: Vec3,
-    area: f32,
-    open: bool,
+    /// Replaced by its children.
+    dead: bool,
     /// The batch's entry distance (≤ each ray's).
     near: f32,
 }
@@ -81,6 +81,7 @@ struct CutEntry {
 pub struct BatchScratch {
     rays: Vec<Option<(Ray, f32)>>,
     cut: Vec<CutEntry>,
+    open: std::collections::BinaryHeap<(u32, u32)>,
     chunks: Vec<Node4>,
     tops: Vec<Node4>,
 }
@@ -422,11 +423,14 @@ impl SphereBvh {
             }
             (near, near.cmple(far * Vec4::splat(NONNEG_SLACK)).bitmask())
         };
-        // Greedy: open the entry with the largest box while the cut stays within `CUT_MAX`.
+        // Greedy: open the entry with the largest box while the cut stays within `CUT_MAX`. Opened
+        // entries stay in `cut` marked dead (no shifting); `open` is a max-heap of the open
+        // entries by box area (non-negative, so the bits order like the floats).
         let cut = &mut scratch.cut;
         cut.clear();
-        let push_kids = |cut: &mut Vec<CutEntry>, at: usize, n: &Node4, (near, mut mask): (Vec4, u32)| {
-            let mut k = at;
+        let open = &mut scratch.open;
+        open.clear();
+        let push_kids = |cut: &mut Vec<CutEntry>, open: &mut std::collections::BinaryHeap<(u32, u32)>, n: &Node4, (near, mut mask): (Vec4, u32)| {
             while mask != 0 {
                 let lane = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
@@ -435,33 +439,31 @@ impl SphereBvh {
                 }
                 let lo = Vec3::new(n.min[0][lane], n.min[1][lane], n.min[2][lane]);
                 let hi = Vec3::new(n.max[0][lane], n.max[1][lane], n.max[2][lane]);
-                let e = hi - lo;
-                let entry = CutEntry {
-                    child: n.child[lane],
-                    lo,
-                    hi,
-                    area: e.x * e.y + e.y * e.z + e.z * e.x,
-                    open: n.child[lane] & LEAF == 0,
-                    near: near[lane],
-                };
-                cut.insert(k, entry);
-                k += 1;
+                if n.child[lane] & LEAF == 0 {
+                    let e = hi - lo;
+                    open.push(((e.x * e.y + e.y * e.z + e.z * e.x).to_bits(), cut.len() as u32));
+                }
+                cut.push(CutEntry { child: n.child[lane], lo, hi, dead: false, near: near[lane] });
             }
         };
         let root = &self.nodes[self.root as usize];
-        push_kids(cut, 0, root, test(root));
+        push_kids(cut, open, root, test(root));
+        let mut live = cut.len();
         // Stop at the first entry that does not fit (each try costs a node fetch).
-        loop {
-            let pick = (0..cut.len()).filter(|&i| cut[i].open).max_by(|&a, &b| cut[a].area.total_cmp(&cut[b].area));
-            let Some(i) = pick else { break };
+        while let Some(&(_, i)) = open.peek() {
+            let i = i as usize;
             let n = &self.nodes[cut[i].child as usize];
             let tested = test(n);
-            if cut.len() - 1 + tested.1.count_ones() as usize > CUT_MAX {
+            let kids = tested.1.count_ones() as usize;
+            if live - 1 + kids > CUT_MAX {
                 break;
             }
-            cut.remove(i);
-            push_kids(cut, i, n, tested);
+            open.pop();
+            cut[i].dead = true;
+            live = live - 1 + kids;
+            push_kids(cut, open, n, tested);
         }
+        cut.retain(|e| !e.dead);
         // Nearest first by the batch's entry distance: each ray then finds the entries it enters
         // in about its own near-to-far order without sorting them.
         cut.sort_by(|a, b| a.near.total_cmp(&b.near));
