@@ -435,9 +435,7 @@ impl PointCloudCapsule {
 
     /// Beyond paper 2: whether any sphere blocks a shadow ray (spheres are opaque casters).
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
-        SECONDARY_STACK.with_borrow_mut(|stack| {
-            self.clouds.iter().any(|cloud| cloud.bvh.closest_hit_slot_with(stack, origin, dir, t_min, t_max).is_some())
-        })
+        SECONDARY_STACK.with_borrow_mut(|stack| self.clouds.iter().any(|cloud| cloud.bvh.any_hit_with(stack, origin, dir, t_min, t_max)))
     }
 
     /// [`PointCloudCapsule::closest_slot`] for a batch of rays (one tile's primary rays): the

@@ -295,9 +295,22 @@ impl SphereBvh {
         let stack = &mut stack.0;
         stack.clear();
         if ray.t_min >= 0.0 {
-            self.traverse::<true>(stack, &ray, len, self.root)
+            self.traverse::<true, false>(stack, &ray, len, self.root)
         } else {
-            self.traverse::<false>(stack, &ray, len, self.root)
+            self.traverse::<false, false>(stack, &ray, len, self.root)
+        }
+    }
+
+    /// Whether any sphere is hit with `t_min ≤ t ≤ t_max` (exactly when
+    /// [`SphereBvh::closest_hit_slot_with`] finds a hit), stopping at the first one found.
+    pub fn any_hit_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
+        let Some((ray, len)) = self.prepare(origin, dir, t_min, t_max) else { return false };
+        let stack = &mut stack.0;
+        stack.clear();
+        if ray.t_min >= 0.0 {
+            self.traverse::<true, true>(stack, &ray, len, self.root).is_some()
+        } else {
+            self.traverse::<false, true>(stack, &ray, len, self.root).is_some()
         }
     }
 
@@ -345,11 +358,11 @@ impl SphereBvh {
             let Some((ray, len)) = p else { continue };
             stack.clear();
             if ray.t_min < 0.0 {
-                *hit = self.traverse::<false>(stack, ray, *len, self.root);
+                *hit = self.traverse::<false, false>(stack, ray, *len, self.root);
                 continue;
             }
             if !cut {
-                *hit = self.traverse::<true>(stack, ray, *len, self.root);
+                *hit = self.traverse::<true, false>(stack, ray, *len, self.root);
                 continue;
             }
             // The cut's entries this ray enters, in the cut's order (nearest first for the
@@ -376,7 +389,7 @@ impl SphereBvh {
                 continue;
             }
             stack.extend(order[1..k].iter().rev());
-            *hit = self.traverse::<true>(stack, ray, *len, order[0].0);
+            *hit = self.traverse::<true, false>(stack, ray, *len, order[0].0);
         }
     }
 
@@ -430,22 +443,23 @@ impl SphereBvh {
         cut.clear();
         let open = &mut scratch.open;
         open.clear();
-        let push_kids = |cut: &mut Vec<CutEntry>, open: &mut std::collections::BinaryHeap<(u32, u32)>, n: &Node4, (near, mut mask): (Vec4, u32)| {
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                if n.child[lane] == LEAF {
-                    continue;
+        let push_kids =
+            |cut: &mut Vec<CutEntry>, open: &mut std::collections::BinaryHeap<(u32, u32)>, n: &Node4, (near, mut mask): (Vec4, u32)| {
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    if n.child[lane] == LEAF {
+                        continue;
+                    }
+                    let lo = Vec3::new(n.min[0][lane], n.min[1][lane], n.min[2][lane]);
+                    let hi = Vec3::new(n.max[0][lane], n.max[1][lane], n.max[2][lane]);
+                    if n.child[lane] & LEAF == 0 {
+                        let e = hi - lo;
+                        open.push(((e.x * e.y + e.y * e.z + e.z * e.x).to_bits(), cut.len() as u32));
+                    }
+                    cut.push(CutEntry { child: n.child[lane], lo, hi, dead: false, near: near[lane] });
                 }
-                let lo = Vec3::new(n.min[0][lane], n.min[1][lane], n.min[2][lane]);
-                let hi = Vec3::new(n.max[0][lane], n.max[1][lane], n.max[2][lane]);
-                if n.child[lane] & LEAF == 0 {
-                    let e = hi - lo;
-                    open.push(((e.x * e.y + e.y * e.z + e.z * e.x).to_bits(), cut.len() as u32));
-                }
-                cut.push(CutEntry { child: n.child[lane], lo, hi, dead: false, near: near[lane] });
-            }
-        };
+            };
         let root = &self.nodes[self.root as usize];
         push_kids(cut, open, root, test(root));
         let mut live = cut.len();
@@ -498,7 +512,14 @@ impl SphereBvh {
     /// Ordered depth-first traversal from the subtree `root`, then the subtrees on `stack`
     /// (see the module notes). `NONNEG`: the ray's `t_min` is ≥ 0 (see [`Ray::slab4`]).
     #[inline]
-    fn traverse<const NONNEG: bool>(&self, stack: &mut Vec<(u32, f32)>, ray: &Ray, len: f32, root: u32) -> Option<(f32, u32)> {
+    /// `ANY`: return the first hit found instead of the closest (for occlusion queries).
+    fn traverse<const NONNEG: bool, const ANY: bool>(
+        &self,
+        stack: &mut Vec<(u32, f32)>,
+        ray: &Ray,
+        len: f32,
+        root: u32,
+    ) -> Option<(f32, u32)> {
         let mut best_t = ray.t_max;
         let mut best = u32::MAX;
         let mut best_slot = 0u32;
@@ -510,6 +531,10 @@ impl SphereBvh {
                 let hits = ray.spheres4(&self.xs[start..], &self.ys[start..], &self.zs[start..], best_t, count);
                 if let Some((t4, mut mask)) = hits {
                     let t4 = t4.to_array();
+                    if ANY {
+                        let lane = mask.trailing_zeros() as usize;
+                        return Some((t4[lane] / len, (start + lane) as u32));
+                    }
                     while mask != 0 {
                         let lane = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
@@ -1108,6 +1133,33 @@ mod tests {
             }
         }
         assert!(hits > 1500 && ties > 200 && cuts > 50, "too little tested: {hits} hits, {ties} ties, {cuts} cuts");
+    }
+
+    /// The occlusion query answers exactly whether the closest-hit query finds a hit, for rays
+    /// that start inside, outside and between spheres, with open and short ranges.
+    #[test]
+    fn any_hit_agrees_with_closest_hit() {
+        use rand::rngs::StdRng;
+        use rand::{Rng, SeedableRng};
+        let mut rng = StdRng::seed_from_u64(11);
+        let centers: Vec<Vec3> =
+            (0..3000).map(|_| Vec3::new(rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0))).collect();
+        let bvh = SphereBvh::build(&centers, 0.05).unwrap();
+        let mut stack = TraversalStack::default();
+        let (mut blocked, mut clear) = (0, 0);
+        for k in 0..4000 {
+            let origin = Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0));
+            let dir = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let (t_min, t_max) = match k % 3 {
+                0 => (0.0, f32::INFINITY),
+                1 => (0.0, rng.random_range(0.0..1.5)),
+                _ => (-0.5, rng.random_range(0.0..4.0)),
+            };
+            let any = bvh.any_hit_with(&mut stack, origin, dir, t_min, t_max);
+            assert_eq!(any, bvh.closest_hit_slot(origin, dir, t_min, t_max).is_some(), "ray {k}");
+            if any { blocked += 1 } else { clear += 1 }
+        }
+        assert!(blocked > 500 && clear > 500, "too little tested: {blocked} blocked, {clear} clear");
     }
 
     #[test]
