@@ -99,9 +99,13 @@ impl<'s> CpuRenderer<'s> {
             on_stage("capsule");
             let (rt_packed, rt_layer, capsule_report) =
                 timed(&mut t.capsule, || self.capsule_stage(camera, settings, Some(&gbuffer.depth)));
+            // Block U's depth test, after the fact (counted with the raster, where the
+            // unclipped order does it).
+            let mut merge_ms = 0.0;
             if let Some(layer) = &rt_layer {
-                raster::merge_rt_layer(&mut gbuffer, layer, camera);
+                timed(&mut merge_ms, || raster::merge_rt_layer(&mut gbuffer, layer, camera));
             }
+            t.raster += merge_ms;
             self.spare_rt_layer = rt_layer;
             timed(&mut t.lighting, || lighting::deferred_lighting_into(&gbuffer, self.scene, camera, &mut buffers.lighting));
             (gbuffer, primary_rays, rt_packed, capsule_report)

@@ -89,15 +89,24 @@ pub fn merge_rt_layer(gbuffer: &mut GBuffer, layer: &RtLayer, camera: &Camera) {
         return;
     }
     let unproject = Unproject::new(camera, w, h);
-    for i in 0..gbuffer.len() {
-        let d = layer.depth[i];
-        if d > 0.0 && d > gbuffer.depth[i] {
-            let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
-            let s = unproject.rt_surface(x, y, d, layer.color[i]);
-            gbuffer.write(i, RT_SCENE_OBJECT, d, &s);
+    // Runs of rows in parallel (each pixel is independent).
+    let band_len = w as usize * MERGE_ROWS;
+    split_bands(gbuffer, band_len).into_par_iter().enumerate().for_each(|(band, mut rows)| {
+        let base = band * band_len;
+        for k in 0..rows.len() {
+            let i = base + k;
+            let d = layer.depth[i];
+            if d > 0.0 && d > rows.depth[k] {
+                let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
+                let s = unproject.rt_surface(x, y, d, layer.color[i]);
+                rows.write(k, RT_SCENE_OBJECT, d, &s);
+            }
         }
-    }
+    });
 }
+
+/// Rows per parallel task of [`merge_rt_layer`].
+const MERGE_ROWS: usize = 16;
 
 /// The G-buffer surface of an RT-layer pixel: emission = its colour (so deferred lighting
 /// reproduces it), no other reflectance, opaque, IOR 1; position = the pixel centre at `depth`
