@@ -5,10 +5,10 @@
 //! Also the camera's primary rays ([`primary_ray`], [`ViewRays`]): the sky lookup here and the
 //! trace stage's `rt-only` mode use the same rays, so both modes agree.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use hybrid_core::shading::{FrameLights, sky};
 use hybrid_core::{GBuffer, NO_OBJECT, Surface};
-use hybrid_scene::{Camera, Projection, Scene};
+use hybrid_scene::{Camera, Environment, Projection, Scene, Skybox, Texture};
 use rayon::prelude::*;
 
 /// Primary rays of a camera for a `width × height` image (row 0 at the top), through pixel
@@ -128,34 +128,119 @@ pub fn deferred_lighting_into(gbuffer: &GBuffer, scene: &Scene, camera: &Camera,
             &g.diffuse[range.clone()],
             &g.specular[range],
         );
+        let mut sky_pixels = Vec::new();
         for (k, px) in rows.iter_mut().enumerate() {
-            *px = if ids[k] == NO_OBJECT {
-                let (x, y) = (k % w, band * LIGHTING_ROWS + k / w);
-                sky(env, &scene.textures, rays.ray(x as u32, y as u32).1)
-            } else {
-                let (d, s) = (dif[k], spe[k]);
-                // The fields lighting reads, exactly as `GBuffer::surface` gives them.
-                let surface = Surface {
-                    position: pos[k],
-                    normal: nrm[k],
-                    emission: emi[k],
-                    ambient: amb[k],
-                    diffuse: d.truncate(),
-                    opacity: d.w,
-                    specular: s.truncate(),
-                    shininess: s.w,
-                    reflectivity: 0.0,
-                    ior: 1.0,
-                };
-                frame_lights.local_lighting(&surface, rays.view_dir(surface.position))
+            if ids[k] == NO_OBJECT {
+                // The skybox behind the pixel, four pixels at a time below.
+                sky_pixels.push(k as u32);
+                continue;
+            }
+            let (d, s) = (dif[k], spe[k]);
+            // The fields lighting reads, exactly as `GBuffer::surface` gives them.
+            let surface = Surface {
+                position: pos[k],
+                normal: nrm[k],
+                emission: emi[k],
+                ambient: amb[k],
+                diffuse: d.truncate(),
+                opacity: d.w,
+                specular: s.truncate(),
+                shininess: s.w,
+                reflectivity: 0.0,
+                ior: 1.0,
             };
+            *px = frame_lights.local_lighting(&surface, rays.view_dir(surface.position));
         }
+        sky_run(&rays, env, &scene.textures, w, band * LIGHTING_ROWS, &sky_pixels, rows);
     });
+}
+
+/// `out[k] = sky(env, textures, rays.ray(x, y).1)` for every band pixel `k` in `pixels` (band
+/// pixel `k` is image pixel (`k % width`, `first_row + k / width`)), bit for bit. A gradient
+/// skybox seen through perspective rays, the common case, is evaluated four pixels at a time:
+/// each lane does exactly the scalar path's operations (the ray direction from the pixel centre,
+/// normalised, normalised again by `sky`, the elevation clamped, the gradient interpolated), so
+/// the division and square roots of four pixels cost those of one.
+fn sky_run(rays: &ViewRays, env: &Environment, textures: &[Texture], width: usize, first_row: usize, pixels: &[u32], out: &mut [Vec3]) {
+    let pixel = |k: u32| ((k as usize % width) as u32, (first_row + k as usize / width) as u32);
+    let (Skybox::Gradient { zenith, horizon, ground }, false) = (&env.skybox, rays.orthographic) else {
+        for &k in pixels {
+            let (x, y) = pixel(k);
+            out[k as usize] = sky(env, textures, rays.ray(x, y).1);
+        }
+        return;
+    };
+    let groups = pixels.chunks_exact(4);
+    for &k in groups.remainder() {
+        let (x, y) = pixel(k);
+        out[k as usize] = sky(env, textures, rays.ray(x, y).1);
+    }
+    let splat = |v: Vec3| [Vec4::splat(v.x), Vec4::splat(v.y), Vec4::splat(v.z)];
+    let (f, r, u) = (splat(rays.forward), splat(rays.right), splat(rays.up));
+    let (zenith, horizon, ground) = (splat(*zenith), splat(*horizon), splat(*ground));
+    for group in groups {
+        // `ViewRays::ray_at` at the four pixel centres.
+        let (mut a, mut b) = ([0.0; 4], [0.0; 4]);
+        for (lane, &k) in group.iter().enumerate() {
+            let (x, y) = pixel(k);
+            let (sx, sy) = (x as f32 + 0.5, y as f32 + 0.5);
+            a[lane] = (sx / rays.width * 2.0 - 1.0) * rays.half_w;
+            b[lane] = (1.0 - sy / rays.height * 2.0) * rays.half_h;
+        }
+        let (a, b) = (Vec4::from_array(a), Vec4::from_array(b));
+        let v = [0, 1, 2].map(|c| f[c] + (r[c] * a + u[c] * b));
+        let normalize_or = |v: [Vec4; 3], fallback: [Vec4; 3]| {
+            let rcp = Vec4::ONE / (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let ok = rcp.is_finite_mask() & rcp.cmpgt(Vec4::ZERO);
+            [0, 1, 2].map(|c| Vec4::select(ok, v[c] * rcp, fallback[c]))
+        };
+        let dir = normalize_or(v, f);
+        // `sky`: normalised again, elevation clamped like `f32::clamp` (NaN stays NaN).
+        let y = normalize_or(dir, [Vec4::ZERO; 3])[1];
+        let y = Vec4::select(y.cmplt(Vec4::NEG_ONE), Vec4::NEG_ONE, y);
+        let y = Vec4::select(y.cmpgt(Vec4::ONE), Vec4::ONE, y);
+        let up = y.cmpge(Vec4::ZERO);
+        let s = Vec4::select(up, y, -y);
+        let c = [0, 1, 2].map(|c| horizon[c] * (Vec4::ONE - s) + Vec4::select(up, zenith[c], ground[c]) * s);
+        let c = c.map(|v| v.to_array());
+        for (lane, &k) in group.iter().enumerate() {
+            out[k as usize] = Vec3::new(c[0][lane], c[1][lane], c[2][lane]);
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The four-wide sky path gives every sky pixel exactly `sky` of its view ray, for
+    /// perspective and orthographic cameras, gradient and one-colour skyboxes, and sizes whose
+    /// rows do not split into groups of four.
+    #[test]
+    fn sky_pixels_equal_the_scalar_sky() {
+        use hybrid_scene::Skybox;
+        let gradient =
+            Skybox::Gradient { zenith: Vec3::new(0.1, 0.3, 0.9), horizon: Vec3::new(0.8, 0.85, 0.9), ground: Vec3::new(0.3, 0.2, 0.1) };
+        for (projection, skybox, (w, h)) in [
+            (Projection::Perspective { fov_y_deg: 70.0, near: 0.1, far: 100.0 }, gradient.clone(), (67, 41)),
+            (Projection::Perspective { fov_y_deg: 150.0, near: 0.1, far: 100.0 }, gradient.clone(), (33, 64)),
+            (Projection::Orthographic { height: 6.0, near: 0.1, far: 100.0 }, gradient, (17, 9)),
+            (Projection::Perspective { fov_y_deg: 50.0, near: 0.1, far: 100.0 }, Skybox::Color(Vec3::new(0.2, 0.4, 0.6)), (9, 7)),
+        ] {
+            for target in [Vec3::new(-1.0, 0.5, -2.0), Vec3::new(1.0, 2.0, 3.2), Vec3::new(1.0, -5.0, 3.0)] {
+                let camera = Camera { position: Vec3::new(1.0, 2.0, 3.0), target, up: Vec3::Y, projection };
+                let mut scene = Scene::new(camera);
+                scene.environment.skybox = skybox.clone();
+                let lit = deferred_lighting(&GBuffer::new(w, h), &scene, &camera);
+                let rays = ViewRays::new(&camera, w, h);
+                for (i, c) in lit.iter().enumerate() {
+                    let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
+                    let want = sky(&scene.environment, &scene.textures, rays.ray(x, y).1);
+                    assert_eq!(c.to_array().map(f32::to_bits), want.to_array().map(f32::to_bits), "pixel ({x}, {y}) of {w}×{h}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn rays_project_onto_their_pixel_centres() {
