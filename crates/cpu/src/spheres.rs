@@ -290,27 +290,26 @@ impl SphereBvh {
 
     /// As [`SphereBvh::closest_hit_slot`], reusing `stack` (one per thread saves its set-up per ray).
     pub fn closest_hit_slot_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
-        let (ray, len) = self.prepare(origin, dir, t_min, t_max)?;
-        // Entry distances are never negative when `t_min` is not: the cheaper slab form applies.
-        let stack = &mut stack.0;
-        stack.clear();
-        if ray.t_min >= 0.0 {
-            self.traverse::<true, false>(stack, &ray, len, self.root)
-        } else {
-            self.traverse::<false, false>(stack, &ray, len, self.root)
-        }
+        self.query::<false>(stack, origin, dir, t_min, t_max)
     }
 
     /// Whether any sphere is hit with `t_min ≤ t ≤ t_max` (exactly when
     /// [`SphereBvh::closest_hit_slot_with`] finds a hit), stopping at the first one found.
     pub fn any_hit_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
-        let Some((ray, len)) = self.prepare(origin, dir, t_min, t_max) else { return false };
+        self.query::<true>(stack, origin, dir, t_min, t_max).is_some()
+    }
+
+    /// One ray from the root: the closest hit, or (`ANY`) the first one found.
+    #[inline]
+    fn query<const ANY: bool>(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
+        let (ray, len) = self.prepare(origin, dir, t_min, t_max)?;
+        // Entry distances are never negative when `t_min` is not: the cheaper slab form applies.
         let stack = &mut stack.0;
         stack.clear();
         if ray.t_min >= 0.0 {
-            self.traverse::<true, true>(stack, &ray, len, self.root).is_some()
+            self.traverse::<true, ANY>(stack, &ray, len, self.root)
         } else {
-            self.traverse::<false, true>(stack, &ray, len, self.root).is_some()
+            self.traverse::<false, ANY>(stack, &ray, len, self.root)
         }
     }
 
@@ -510,9 +509,9 @@ impl SphereBvh {
     }
 
     /// Ordered depth-first traversal from the subtree `root`, then the subtrees on `stack`
-    /// (see the module notes). `NONNEG`: the ray's `t_min` is ≥ 0 (see [`Ray::slab4`]).
+    /// (see the module notes). `NONNEG`: the ray's `t_min` is ≥ 0 (see [`Ray::slab4`]). `ANY`:
+    /// return the first hit found instead of the closest (for occlusion queries).
     #[inline]
-    /// `ANY`: return the first hit found instead of the closest (for occlusion queries).
     fn traverse<const NONNEG: bool, const ANY: bool>(
         &self,
         stack: &mut Vec<(u32, f32)>,
