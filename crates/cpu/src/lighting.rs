@@ -163,18 +163,18 @@ pub fn deferred_lighting_into(gbuffer: &GBuffer, scene: &Scene, camera: &Camera,
 /// the division and square roots of four pixels cost those of one.
 fn sky_run(rays: &ViewRays, env: &Environment, textures: &[Texture], width: usize, first_row: usize, pixels: &[u32], out: &mut [Vec3]) {
     let pixel = |k: u32| ((k as usize % width) as u32, (first_row + k as usize / width) as u32);
-    let (Skybox::Gradient { zenith, horizon, ground }, false) = (&env.skybox, rays.orthographic) else {
-        for &k in pixels {
-            let (x, y) = pixel(k);
-            out[k as usize] = sky(env, textures, rays.ray(x, y).1);
-        }
-        return;
+    let gradient = match (&env.skybox, rays.orthographic) {
+        (Skybox::Gradient { zenith, horizon, ground }, false) => Some((zenith, horizon, ground)),
+        _ => None,
     };
-    let groups = pixels.chunks_exact(4);
-    for &k in groups.remainder() {
+    // Whole groups of four go the vector way (when it applies), the rest one by one.
+    let vector = if gradient.is_some() { pixels.len() / 4 * 4 } else { 0 };
+    for &k in &pixels[vector..] {
         let (x, y) = pixel(k);
         out[k as usize] = sky(env, textures, rays.ray(x, y).1);
     }
+    let Some((zenith, horizon, ground)) = gradient else { return };
+    let groups = pixels[..vector].chunks_exact(4);
     let splat = |v: Vec3| [Vec4::splat(v.x), Vec4::splat(v.y), Vec4::splat(v.z)];
     let (f, r, u) = (splat(rays.forward), splat(rays.right), splat(rays.up));
     let (zenith, horizon, ground) = (splat(*zenith), splat(*horizon), splat(*ground));
