@@ -15,7 +15,7 @@ use std::time::Instant;
 use criterion::{Criterion, criterion_group};
 use glam::Vec3;
 use hybrid_core::depth_merge::{PackedRtFrame, encode_hit, synthesize_depth};
-use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, RayGen, RtCapsule};
+use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RayGen, RtCapsule};
 use hybrid_cpu::spheres::SphereBvh;
 use hybrid_scene::{Camera, DirectionalLight, Environment, Lights, PointCloud, PointColoring, Projection};
 
@@ -193,6 +193,15 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
     let (full_ms, hits, full_sum) = trace(None);
     let cpu_per_frame = (cpu_seconds() - cpu0) / runs as f64;
     let (clip_ms, clip_hits, clip_sum) = trace(Some(&wall));
+    // The same frames by BVH traversal (PrimaryVisibility::Bvh): the same checksums, other speed.
+    capsule.primary_visibility = PrimaryVisibility::Bvh;
+    let mut trace = |clip: Option<&[f32]>| {
+        let req = CapsuleRequest { camera, width: W, height: H, clip_depth: clip };
+        let stats: Vec<_> = (0..runs).map(|_| capsule.render(&req, &mut frame)).collect();
+        (median(stats.iter().map(|s| s.trace_ms).collect()), checksum(&frame))
+    };
+    let (bvh_ms, bvh_sum) = trace(None);
+    let (bvh_clip_ms, bvh_clip_sum) = trace(Some(&wall));
     let rays = (W * H) as f64;
     // Block P alone (it is fused into the trace): encode one frame's worth of hits.
     let raygen = RayGen::new(&camera, W, H);
@@ -208,13 +217,15 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
         "{label}: {n} points, {threads} threads | build {build:.0} ms | trace+pack 1920x1080 {full_ms:.1} ms = {:.2} Mrays/s ({hits} hits) | \
          clipped by wall {clip_ms:.1} ms = {:.2} Mrays/s ({clip_hits} hits), speed-up {:.2}x | ray gen + block D + P alone (1 thread) {pack_ms:.1} ms | \
          memory {:.1} MB = {:.1} B/point | unclipped: {:.2} Mrays per CPU-second | build {build_cpu_ms:.0} CPU-ms | \
-         checksums {full_sum:016x} {clip_sum:016x}",
+         checksums {full_sum:016x} {clip_sum:016x} | BVH traversal instead: {bvh_ms:.1} ms ({:.2}x the time), clipped {bvh_clip_ms:.1} ms, \
+         checksums {bvh_sum:016x} {bvh_clip_sum:016x}",
         rays / full_ms / 1e3,
         rays / clip_ms / 1e3,
         full_ms / clip_ms,
         bytes as f64 / 1e6,
         bytes as f64 / n as f64,
         rays / cpu_per_frame / 1e6,
+        bvh_ms / full_ms,
         threads = rayon::current_num_threads(),
     );
 }

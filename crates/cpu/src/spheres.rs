@@ -332,6 +332,20 @@ impl SphereBvh {
         if e > x { None } else { Some((ray, len)) }
     }
 
+    /// The ray of [`SphereBvh::closest_hit_slot_with`] as the traversal sees it, for a caller that
+    /// finds candidate spheres by other means ([`crate::capsule`]'s projected primary rays) and
+    /// tests them with [`sphere_hits4`]: unit direction, `t` range in its units, and `|dir|`
+    /// to divide a hit's `t` by. `None` exactly where the traversal would not start.
+    #[inline]
+    pub fn prepare_ray(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<PreparedRay> {
+        self.prepare(origin, dir, t_min, t_max).map(|(r, len)| PreparedRay { o: r.o, d: r.d, t_min: r.t_min, t_max: r.t_max, len })
+    }
+
+    /// Sphere centres in leaf-order slots, one slice per axis (each padded past [`SphereBvh::len`]).
+    pub fn centers_soa(&self) -> (&[f32], &[f32], &[f32]) {
+        (&self.xs, &self.ys, &self.zs)
+    }
+
     /// [`SphereBvh::closest_hit_slot_with`] for a batch of rays (for instance one screen tile's
     /// primary rays): `hits[i]` is exactly its result for `rays[i]`. When the rays share one
     /// origin (bit for bit) and have `t_min ≥ 0`, the subtrees that any of them may enter are found
@@ -633,6 +647,37 @@ pub fn closest_hit_brute_force(centers: &[Vec3], radius: f32, origin: Vec3, dir:
         }
     }
     best.map(|(t, i)| (t / len, i))
+}
+
+/// A ray as [`SphereBvh::prepare_ray`] gives it: origin, unit direction, `t` range in the unit
+/// direction's units, and the length of the direction it was made from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PreparedRay {
+    pub o: Vec3,
+    pub d: Vec3,
+    pub t_min: f32,
+    pub t_max: f32,
+    pub len: f32,
+}
+
+/// [`ray_sphere`] of one sphere (centre `c`, squared radius `r2`) against four rays (lanes: origins
+/// `o`, unit directions `d`, ranges `t_min..=t_max`), each lane exactly the scalar operations in
+/// the same order (so bit for bit [`ray_sphere`] and the traversal's leaf test): each lane's `t`
+/// and the mask of the lanes hit.
+#[inline(always)]
+pub fn sphere_hits4(c: Vec3, r2: f32, o: [Vec4; 3], d: [Vec4; 3], t_min: Vec4, t_max: Vec4) -> (Vec4, u32) {
+    let (ox, oy, oz) = (Vec4::splat(c.x) - o[0], Vec4::splat(c.y) - o[1], Vec4::splat(c.z) - o[2]);
+    let [dx, dy, dz] = d;
+    let tc = ox * dx + oy * dy + oz * dz;
+    let (px, py, pz) = (ox - tc * dx, oy - tc * dy, oz - tc * dz);
+    let p2 = px * px + py * py + pz * pz;
+    let r2 = Vec4::splat(r2);
+    let inside = p2.cmple(r2);
+    let half = (r2 - p2).sqrt();
+    let t0 = tc - half;
+    let t1 = tc + half;
+    let t = Vec4::select(t0.cmpge(t_min), t0, t1);
+    (t, (inside & t.cmpge(t_min) & t.cmple(t_max)).bitmask())
 }
 
 /// A ray prepared for traversal (unit direction).

@@ -5,7 +5,8 @@ use hybrid_core::depth_merge::{
     PackedRtFrame, alpha_kept, decode_texel, encode_hit, pack_texel, pack_unorm4x8, unpack, unpack_texel, unpack_unorm4x8,
 };
 use hybrid_cpu::capsule::{
-    CapsuleRequest, ExchangeError, ExchangeState, FrameExchange, OwnedCapsuleRequest, PointCloudCapsule, RayGen, RtCapsule, render_sync,
+    CapsuleRequest, ExchangeError, ExchangeState, FrameExchange, OwnedCapsuleRequest, PointCloudCapsule, PrimaryVisibility, RayGen,
+    RtCapsule, render_sync,
 };
 use hybrid_cpu::spheres::{SphereBvh, closest_hit_brute_force};
 use hybrid_scene::texture::linear_to_srgb;
@@ -452,5 +453,56 @@ fn handshake_exchange_matches_sync_and_checks_order() {
         assert_eq!(stats.rays, 64 * 48);
         assert!(frame == want);
         exchange.recycle(frame);
+    }
+}
+
+/// Both ways of finding a primary ray's sphere give the same packed frame, bit for bit: the tree
+/// scan from outside, from inside the crown (spheres beside, behind and across the near plane),
+/// clipped by a raster depth, orthographic, and two overlapping clouds of different radii sharing
+/// points (ties keep the earlier cloud, and within a cloud the lower index).
+#[test]
+fn projected_and_bvh_primary_visibility_give_identical_frames() {
+    let points = tree_points();
+    let outside = framing_camera(&points);
+    let (lo, hi) = points.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| (a.min(*p), b.max(*p)));
+    let centre = 0.5 * (lo + hi);
+    let inside = Camera {
+        position: centre + Vec3::new(0.05, 0.3, 0.02),
+        target: centre + Vec3::new(1.0, 0.2, -1.0),
+        up: Vec3::Y,
+        projection: Projection::Perspective { fov_y_deg: 90.0, near: 0.01, far: 100.0 },
+    };
+    let ortho = Camera { projection: Projection::Orthographic { height: (hi - lo).max_element(), near: 0.1, far: 100.0 }, ..outside };
+    let mut rng = StdRng::seed_from_u64(7);
+    let shared: Vec<Vec3> = points.iter().step_by(7).copied().collect();
+    let mut other: Vec<Vec3> = shared.iter().map(|p| *p + Vec3::new(rng.random_range(-0.02..0.02), 0.0, 0.0)).collect();
+    other.extend(shared.iter().take(500));
+    let one = [cloud(points.clone(), 0.012, PointColoring::Height)];
+    let two = [cloud(shared, 0.02, PointColoring::Uniform(Vec3::new(0.6, 0.2, 0.1))), cloud(other, 0.02, PointColoring::Height)];
+    let (w, h) = (150u32, 97u32);
+    // A raster depth over the left half: a wall at the cloud's centre distance.
+    let (n, f) = outside.near_far();
+    let wall = hybrid_core::depth_merge::synthesize_depth(outside.position.distance(centre), -1.0, n, f);
+    let clip: Vec<f32> = (0..w * h).map(|i| if i % w < w / 2 { wall } else { 0.0 }).collect();
+    /// Name, clouds, camera, raster depth to clip at.
+    type Case<'a> = (&'a str, &'a [PointCloud], Camera, Option<&'a [f32]>);
+    let cases: [Case; 5] = [
+        ("outside", &one, outside, None),
+        ("inside", &one, inside, None),
+        ("clipped", &one, outside, Some(&clip)),
+        ("orthographic", &one, ortho, None),
+        ("two clouds", &two, outside, None),
+    ];
+    for (name, clouds, camera, clip_depth) in cases {
+        let mut capsule = PointCloudCapsule::new(clouds, lights(), Environment::default()).unwrap();
+        let request = CapsuleRequest { camera, width: w, height: h, clip_depth };
+        capsule.primary_visibility = PrimaryVisibility::Projected;
+        let (projected, stats) = render_sync(&mut capsule, &request);
+        capsule.primary_visibility = PrimaryVisibility::Bvh;
+        let (bvh, bvh_stats) = render_sync(&mut capsule, &request);
+        assert!(stats.hits > 100, "{name}: only {} hits", stats.hits);
+        assert_eq!(stats.hits, bvh_stats.hits, "{name}: hit counts");
+        let differ = projected.texels.iter().zip(&bvh.texels).filter(|(a, b)| a != b).count();
+        assert_eq!(differ, 0, "{name}: {differ} texels differ");
     }
 }

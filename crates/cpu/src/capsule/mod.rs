@@ -28,6 +28,8 @@ use rayon::prelude::*;
 
 use crate::spheres::{BatchRay, BatchScratch, SphereBvh, SphereBvhError, TraversalStack};
 
+mod projected;
+
 pub use hybrid_core::depth_merge::CapsuleStats;
 
 /// What the host asks of the capsule each frame. `clip_depth` (optional, beyond the paper) is the
@@ -340,10 +342,30 @@ thread_local! {
     static SECONDARY_STACK: std::cell::RefCell<TraversalStack> = std::cell::RefCell::new(TraversalStack::default());
 }
 
+/// How the capsule finds each primary ray's closest sphere. Both give the same frame, bit for bit
+/// (the closest hit over all spheres, ties to the lower point index); only the speed differs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PrimaryVisibility {
+    /// Every sphere's bounds projected to a pixel rectangle and filed by band of rows; each ray
+    /// tested only against the spheres over its pixel (module `projected`). Costs one projection
+    /// per sphere in view, hidden ones included, and a few ray tests per pixel a sphere covers:
+    /// fastest when spheres are small on screen, as in scans of millions of points.
+    #[default]
+    Projected,
+    /// Each 8×8 tile's rays traced through the sphere BVH from the tile's shared cut (paper 2's
+    /// traversal, as RT cores or Embree do). Costs grow with rays and tree depth, not with the
+    /// spheres in view: better for a few large spheres filling the screen.
+    Bvh,
+}
+
 /// The point-cloud capsule: spheres traced through their own BVH, Blinn–Phong shaded with the
 /// scene's lights and ambient, packed with their synthesized depth.
 pub struct PointCloudCapsule {
     clouds: Vec<Cloud>,
+    /// How primary rays find their sphere (the frame is the same either way).
+    pub primary_visibility: PrimaryVisibility,
+    /// Per-cloud bins of the projected path, kept between frames for their allocations.
+    bins: Vec<projected::CloudBins>,
     /// The scene's lights and ambient, with their per-frame constants (as `local_lighting`, bit
     /// for bit).
     lights: FrameLights,
@@ -374,7 +396,14 @@ impl PointCloudCapsule {
             built.push(Cloud { bvh, color, specular: pc.specular, shininess: pc.shininess });
         }
         let points = clouds.iter().map(|c| c.points.len() as u64).sum();
-        Ok(Self { clouds: built, lights: FrameLights::new(&lights, &env), build_ms: start.elapsed().as_secs_f64() * 1e3, points })
+        Ok(Self {
+            clouds: built,
+            primary_visibility: PrimaryVisibility::default(),
+            bins: Vec::new(),
+            lights: FrameLights::new(&lights, &env),
+            build_ms: start.elapsed().as_secs_f64() * 1e3,
+            points,
+        })
     }
 
     /// Bytes of the BVHs, sphere centres and colours.
@@ -485,77 +514,12 @@ impl RtCapsule for PointCloudCapsule {
             }
             ok
         });
-        let this = &*self;
-        let hits: usize = if w == 0 {
+        let hits = if w == 0 {
             0
+        } else if self.primary_visibility == PrimaryVisibility::Projected && w <= projected::MAX_SIDE && h <= projected::MAX_SIDE {
+            self.render_projected(request, &raygen, clip, out)
         } else {
-            // Bands of `BAND` rows, one rayon task each (`with_max_len(1)`: ray cost is uneven,
-            // KNOWN-GOOD gotcha 12), traced in `TILE`×`TILE` tiles, each one batch of
-            // `SphereBvh::closest_hits_batch` (8×8 measured a little faster than 16×16: a narrower
-            // frustum gives a deeper cut). Each pixel's ray is the same.
-            const BAND: usize = 16;
-            const TILE: usize = 8;
-            let wu = w as usize;
-            // Each pixel's ray is `raygen.ray(col, row)`; the per-column and per-row halves once.
-            let view_x: Vec<f32> = (0..w).map(|c| raygen.view_x(c)).collect();
-            let view_x = &view_x;
-            out.texels
-                .par_chunks_mut(wu * BAND)
-                .with_max_len(1)
-                .enumerate()
-                .map(|(band, texels)| {
-                    let mut hits = 0;
-                    let mut stack = TraversalStack::default();
-                    let mut scratch = BatchScratch::default();
-                    let mut rays = Vec::with_capacity(TILE * TILE);
-                    let mut batch = Vec::with_capacity(TILE * TILE);
-                    let mut found = Vec::with_capacity(TILE * TILE);
-                    let mut best = Vec::with_capacity(TILE * TILE);
-                    let rows = texels.len() / wu;
-                    let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((band * BAND + r) as u32)).collect();
-                    for (row0, col0) in (0..rows).step_by(TILE).flat_map(|r| (0..wu).step_by(TILE).map(move |c| (r, c))) {
-                        let cols = col0..(col0 + TILE).min(wu);
-                        let tile_rows = row0..(row0 + TILE).min(rows);
-                        rays.clear();
-                        batch.clear();
-                        for r in tile_rows.clone() {
-                            let row = band * BAND + r;
-                            for col in cols.clone() {
-                                let ray = raygen.ray_at(view_x[col], view_y[r]);
-                                let mut t_max = ray.t_max;
-                                if let Some(c) = clip {
-                                    let z = c[row * wu + col];
-                                    if z > 0.0 {
-                                        t_max = t_max.min(raygen.t_at_depth(&ray, z));
-                                    }
-                                }
-                                rays.push(ray);
-                                batch.push(BatchRay { origin: ray.origin, dir: ray.dir, t_min: ray.t_min, t_max });
-                            }
-                        }
-                        // The tile's rays as one batch (they share the eye: the tree's levels above
-                        // the tile's frustum are skipped), then shaded in the same order.
-                        best.resize(rays.len(), None);
-                        this.closest_slots_batch(&mut scratch, &mut stack, &mut batch, &mut found, &mut best);
-                        let mut i = 0;
-                        for r in tile_rows.clone() {
-                            for col in cols.clone() {
-                                let ray = &rays[i];
-                                texels[r * wu + col] = match best[i] {
-                                    Some((t, ci, slot)) => {
-                                        hits += 1;
-                                        // Block D then block P, fused as in the paper's ray-generation shader.
-                                        encode_hit(this.shade_hit(ray, t, ci, slot), raygen.depth(ray, t))
-                                    }
-                                    None => MISS_TEXEL,
-                                };
-                                i += 1;
-                            }
-                        }
-                    }
-                    hits
-                })
-                .sum()
+            self.render_bvh(&raygen, clip, out)
         };
         CapsuleStats {
             points: self.points,
@@ -566,5 +530,130 @@ impl RtCapsule for PointCloudCapsule {
             hits: hits as u64,
             bytes: self.bytes() as u64,
         }
+    }
+}
+
+impl PointCloudCapsule {
+    /// Pixel `(col, row)`'s ray `t_max`, clipped at the raster's depth there when `clip` is given.
+    #[inline]
+    fn clipped_t_max(raygen: &RayGen, ray: &PrimaryRay, clip: Option<&[f32]>, pixel: usize) -> f32 {
+        let mut t_max = ray.t_max;
+        if let Some(c) = clip {
+            let z = c[pixel];
+            if z > 0.0 {
+                t_max = t_max.min(raygen.t_at_depth(ray, z));
+            }
+        }
+        t_max
+    }
+
+    /// [`PrimaryVisibility::Bvh`]: the frame's texels, returning the number of hits.
+    fn render_bvh(&self, raygen: &RayGen, clip: Option<&[f32]>, out: &mut PackedRtFrame) -> usize {
+        let this = self;
+        let w = out.width;
+        // Bands of `BAND` rows, one rayon task each (`with_max_len(1)`: ray cost is uneven,
+        // KNOWN-GOOD gotcha 12), traced in `TILE`×`TILE` tiles, each one batch of
+        // `SphereBvh::closest_hits_batch` (8×8 measured a little faster than 16×16: a narrower
+        // frustum gives a deeper cut). Each pixel's ray is the same.
+        const BAND: usize = 16;
+        const TILE: usize = 8;
+        let wu = w as usize;
+        // Each pixel's ray is `raygen.ray(col, row)`; the per-column and per-row halves once.
+        let view_x: Vec<f32> = (0..w).map(|c| raygen.view_x(c)).collect();
+        let view_x = &view_x;
+        out.texels
+            .par_chunks_mut(wu * BAND)
+            .with_max_len(1)
+            .enumerate()
+            .map(|(band, texels)| {
+                let mut hits = 0;
+                let mut stack = TraversalStack::default();
+                let mut scratch = BatchScratch::default();
+                let mut rays = Vec::with_capacity(TILE * TILE);
+                let mut batch = Vec::with_capacity(TILE * TILE);
+                let mut found = Vec::with_capacity(TILE * TILE);
+                let mut best = Vec::with_capacity(TILE * TILE);
+                let rows = texels.len() / wu;
+                let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((band * BAND + r) as u32)).collect();
+                for (row0, col0) in (0..rows).step_by(TILE).flat_map(|r| (0..wu).step_by(TILE).map(move |c| (r, c))) {
+                    let cols = col0..(col0 + TILE).min(wu);
+                    let tile_rows = row0..(row0 + TILE).min(rows);
+                    rays.clear();
+                    batch.clear();
+                    for r in tile_rows.clone() {
+                        let row = band * BAND + r;
+                        for col in cols.clone() {
+                            let ray = raygen.ray_at(view_x[col], view_y[r]);
+                            let t_max = Self::clipped_t_max(raygen, &ray, clip, row * wu + col);
+                            rays.push(ray);
+                            batch.push(BatchRay { origin: ray.origin, dir: ray.dir, t_min: ray.t_min, t_max });
+                        }
+                    }
+                    // The tile's rays as one batch (they share the eye: the tree's levels above
+                    // the tile's frustum are skipped), then shaded in the same order.
+                    best.resize(rays.len(), None);
+                    this.closest_slots_batch(&mut scratch, &mut stack, &mut batch, &mut found, &mut best);
+                    let mut i = 0;
+                    for r in tile_rows.clone() {
+                        for col in cols.clone() {
+                            let ray = &rays[i];
+                            texels[r * wu + col] = match best[i] {
+                                Some((t, ci, slot)) => {
+                                    hits += 1;
+                                    // Block D then block P, fused as in the paper's ray-generation shader.
+                                    encode_hit(this.shade_hit(ray, t, ci, slot), raygen.depth(ray, t))
+                                }
+                                None => MISS_TEXEL,
+                            };
+                            i += 1;
+                        }
+                    }
+                }
+                hits
+            })
+            .sum()
+    }
+
+    /// [`PrimaryVisibility::Projected`]: the frame's texels, returning the number of hits. Each
+    /// pixel's ray, limits and shading are those of [`PointCloudCapsule::render_bvh`].
+    fn render_projected(&mut self, request: &CapsuleRequest<'_>, raygen: &RayGen, clip: Option<&[f32]>, out: &mut PackedRtFrame) -> usize {
+        let (w, h) = (request.width, request.height);
+        self.bins.resize_with(self.clouds.len(), Default::default);
+        for (bins, cloud) in self.bins.iter_mut().zip(&self.clouds) {
+            bins.bin(&cloud.bvh, &request.camera, w, h);
+        }
+        let this = &*self;
+        let wu = w as usize;
+        let view_x: Vec<f32> = (0..w).map(|c| raygen.view_x(c)).collect();
+        let view_x = &view_x;
+        out.texels
+            .par_chunks_mut(wu * projected::BAND_ROWS)
+            .with_max_len(1)
+            .enumerate()
+            .map_init(projected::BandScratch::default, |s, (band, texels)| {
+                let rows = texels.len() / wu;
+                let row0 = band * projected::BAND_ROWS;
+                let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((row0 + r) as u32)).collect();
+                let primary = |row: usize, col: usize| raygen.ray_at(view_x[col], view_y[row]);
+                s.begin(texels.len());
+                for (ci, cloud) in this.clouds.iter().enumerate() {
+                    s.trace_cloud(&this.bins[ci], &cloud.bvh, ci, band, (wu, rows), |(row, col), limit| {
+                        let ray = primary(row, col);
+                        let t_max = limit.unwrap_or_else(|| Self::clipped_t_max(raygen, &ray, clip, (row0 + row) * wu + col));
+                        cloud.bvh.prepare_ray(ray.origin, ray.dir, ray.t_min, t_max)
+                    });
+                }
+                let mut hits = 0;
+                for (i, texel) in texels.iter_mut().enumerate() {
+                    if let Some((t, ci, slot)) = s.best[i] {
+                        hits += 1;
+                        let ray = primary(i / wu, i % wu);
+                        // Block D then block P, as in the BVH path.
+                        *texel = encode_hit(this.shade_hit(&ray, t, ci, slot), raygen.depth(&ray, t));
+                    }
+                }
+                hits
+            })
+            .sum()
     }
 }
