@@ -626,6 +626,8 @@ impl PointCloudCapsule {
         let wu = w as usize;
         let view_x: Vec<f32> = (0..w).map(|c| raygen.view_x(c)).collect();
         let view_x = &view_x;
+        // Every perspective ray starts at the eye, exactly ([`RayGen::ray_at`]).
+        let shared_origin = (!raygen.ortho).then_some(raygen.eye);
         out.texels
             .par_chunks_mut(wu * projected::BAND_ROWS)
             .with_max_len(1)
@@ -637,19 +639,21 @@ impl PointCloudCapsule {
                 let primary = |row: usize, col: usize| raygen.ray_at(view_x[col], view_y[row]);
                 s.begin(texels.len());
                 for (ci, cloud) in this.clouds.iter().enumerate() {
-                    s.trace_cloud(&this.bins[ci], &cloud.bvh, ci, band, (wu, rows), |(row, col), limit| {
+                    s.trace_cloud(&this.bins[ci], &cloud.bvh, ci, band, (wu, rows), shared_origin, |(row, col), limit| {
                         let ray = primary(row, col);
                         let t_max = limit.unwrap_or_else(|| Self::clipped_t_max(raygen, &ray, clip, (row0 + row) * wu + col));
                         cloud.bvh.prepare_ray(ray.origin, ray.dir, ray.t_min, t_max)
                     });
                 }
                 let mut hits = 0;
-                for (i, texel) in texels.iter_mut().enumerate() {
-                    if let Some((t, ci, slot)) = s.best[i] {
-                        hits += 1;
-                        let ray = primary(i / wu, i % wu);
-                        // Block D then block P, as in the BVH path.
-                        *texel = encode_hit(this.shade_hit(&ray, t, ci, slot), raygen.depth(&ray, t));
+                for (row, (texels, best)) in texels.chunks_mut(wu).zip(s.best.chunks(wu)).enumerate() {
+                    for (col, (texel, best)) in texels.iter_mut().zip(best).enumerate() {
+                        if let Some((t, ci, slot)) = *best {
+                            hits += 1;
+                            let ray = primary(row, col);
+                            // Block D then block P, as in the BVH path.
+                            *texel = encode_hit(this.shade_hit(&ray, t, ci, slot), raygen.depth(&ray, t));
+                        }
                     }
                 }
                 hits

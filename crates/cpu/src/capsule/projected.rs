@@ -267,7 +267,8 @@ const NONE: u32 = u32::MAX;
 /// pixels load as one vector each) and the closest hit per pixel over the clouds done so far.
 #[derive(Debug, Default)]
 pub(super) struct BandScratch {
-    covered: Vec<bool>,
+    /// Whether the pixel's ray for the current cloud is made.
+    ready: Vec<bool>,
     o: [Vec<f32>; 3],
     d: [Vec<f32>; 3],
     t_min: Vec<f32>,
@@ -294,9 +295,11 @@ impl BandScratch {
 
     /// Cloud `ci` (its `bins` and `bvh`) over band `band` (`rows` rows of `w` pixels): each pixel
     /// whose ray one of the cloud's spheres may hit gets its ray from `prepare((row in band,
-    /// column), t so far)`
-    /// (`None`: no ray), and `best` takes the cloud's closest hit where it is nearer than the
-    /// clouds' before (ties keep the earlier cloud), as the BVH path does.
+    /// column), t so far)` (`None`: no ray) when a sphere first covers it, and `best` takes the
+    /// cloud's closest hit where it is nearer than the clouds' before (ties keep the earlier
+    /// cloud), as the BVH path does. `shared_origin`: the origin every prepared ray has, bit for
+    /// bit, if there is one (a perspective camera's eye), splatted instead of loaded per pixel.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn trace_cloud(
         &mut self,
         bins: &CloudBins,
@@ -304,68 +307,37 @@ impl BandScratch {
         ci: usize,
         band: usize,
         (w, rows): (usize, usize),
+        shared_origin: Option<Vec3>,
         prepare: impl Fn((usize, usize), Option<f32>) -> Option<PreparedRay>,
     ) {
         let y_lo = band * bins.band_rows;
         let y_hi = y_lo + rows;
         let pixels = rows * w;
-        let rows_of = |b: &Binned| (b.y0 as usize).max(y_lo)..(b.y1 as usize + 1).min(y_hi);
-
-        // The pixels some sphere may hit, then their rays.
-        self.covered.clear();
-        self.covered.resize(pixels, false);
-        for b in bins.band(band) {
-            for y in rows_of(b) {
-                let base = (y - y_lo) * w;
-                self.covered[base + b.x0 as usize..=base + b.x1 as usize].fill(true);
-            }
-        }
-        // Whether every prepared ray starts at one point (bit for bit: a perspective camera's eye),
-        // which the tests then splat instead of loading per pixel.
-        let mut shared_origin: Option<Option<Vec3>> = None;
-        for (i, row, col) in (0..rows).flat_map(|row| (0..w).map(move |col| (row * w + col, row, col))) {
-            if !self.covered[i] {
-                continue;
-            }
-            self.best_slot[i] = NONE;
-            match prepare((row, col), self.best[i].map(|b| b.0)) {
-                Some(r) => {
-                    shared_origin = match shared_origin {
-                        None => Some(Some(r.o)),
-                        Some(Some(o)) if o.to_array().map(f32::to_bits) == r.o.to_array().map(f32::to_bits) => Some(Some(o)),
-                        Some(_) => Some(None),
-                    };
-                    for a in 0..3 {
-                        self.o[a][i] = r.o[a];
-                        self.d[a][i] = r.d[a];
-                    }
-                    self.t_min[i] = r.t_min;
-                    self.t_max[i] = r.t_max;
-                    self.len[i] = r.len;
-                    self.best_t[i] = r.t_max;
-                }
-                None => {
-                    // An empty range: no lane test passes (`t ≥ +∞` and `t ≤ −∞` both fail).
-                    self.t_min[i] = f32::INFINITY;
-                    self.t_max[i] = f32::NEG_INFINITY;
-                }
-            }
-        }
-
-        // Each sphere against the rays of its rectangle, four pixels at a time.
+        self.ready.clear();
+        self.ready.resize(pixels + 3, false);
+        self.best_slot[..pixels].fill(NONE);
         let r = bvh.radius();
         let r2 = r * r;
         for b in bins.band(band) {
-            for y in rows_of(b) {
-                let base = (y - y_lo) * w;
+            for y in (b.y0 as usize).max(y_lo)..(b.y1 as usize + 1).min(y_hi) {
+                let row = y - y_lo;
+                let base = row * w;
                 let (x0, x1) = (b.x0 as usize, b.x1 as usize);
                 for x in (x0..=x1).step_by(4) {
                     let i = base + x;
                     let lanes = (x1 - x + 1).min(4);
+                    // Each pixel's ray is made when a sphere first covers it.
+                    for lane in 0..lanes {
+                        if !self.ready[i + lane] {
+                            self.ready[i + lane] = true;
+                            let j = i + lane;
+                            self.set_ray(j, prepare((row, x + lane), self.best[j].map(|b| b.0)));
+                        }
+                    }
                     let load = |v: &[f32]| Vec4::from_slice(&v[i..i + 4]);
                     let o = match shared_origin {
-                        Some(Some(o)) => [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
-                        _ => [load(&self.o[0]), load(&self.o[1]), load(&self.o[2])],
+                        Some(o) => [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+                        None => [load(&self.o[0]), load(&self.o[1]), load(&self.o[2])],
                     };
                     let d = [load(&self.d[0]), load(&self.d[1]), load(&self.d[2])];
                     let (t4, mask) = sphere_hits4(b.c, r2, o, d, load(&self.t_min), load(&self.t_max));
@@ -373,44 +345,71 @@ impl BandScratch {
                     if mask == 0 {
                         continue;
                     }
-                    // The traversal's rule: nearer, or as near with a lower original index. Ties
-                    // are rare: lane by lane; otherwise the four lanes are updated at once.
-                    let best4 = load(&self.best_t);
-                    let lane_mask = BVec4A::new(mask & 1 != 0, mask & 2 != 0, mask & 4 != 0, mask & 8 != 0);
-                    if (t4.cmpeq(best4) & lane_mask).any() {
-                        let mut m = mask;
-                        while m != 0 {
-                            let lane = m.trailing_zeros() as usize;
-                            m &= m - 1;
-                            let (j, t) = (i + lane, t4[lane]);
-                            let best = self.best_t[j];
-                            let closer = t < best
-                                || (t == best
-                                    && (self.best_slot[j] == NONE || bvh.index_of_slot(b.slot) < bvh.index_of_slot(self.best_slot[j])));
-                            if closer {
-                                self.best_t[j] = t;
-                                self.best_slot[j] = b.slot;
-                            }
-                        }
-                        continue;
-                    }
-                    let closer = t4.cmplt(best4) & lane_mask;
-                    Vec4::select(closer, t4, best4).write_to_slice(&mut self.best_t[i..i + 4]);
-                    let slots = UVec4::from_slice(&self.best_slot[i..i + 4]);
-                    let c = closer.bitmask();
-                    let closer = BVec4::new(c & 1 != 0, c & 2 != 0, c & 4 != 0, c & 8 != 0);
-                    UVec4::select(closer, UVec4::splat(b.slot), slots).write_to_slice(&mut self.best_slot[i..i + 4]);
+                    self.take_hits(i, mask, t4, b.slot, bvh);
                 }
             }
         }
 
         // The cloud's hits, in the primary ray's units, against the clouds before.
-        for i in (0..pixels).filter(|&i| self.covered[i] && self.best_slot[i] != NONE) {
+        for i in (0..pixels).filter(|&i| self.best_slot[i] != NONE) {
             let t = self.best_t[i] / self.len[i];
             if self.best[i].is_none_or(|b| t < b.0) {
                 self.best[i] = Some((t, ci, self.best_slot[i]));
             }
         }
+    }
+
+    /// Stores pixel `i`'s prepared ray (`None`: an empty range, which no lane test passes, as
+    /// `t ≥ +∞` and `t ≤ −∞` both fail); its closest hit so far is none, at its `t_max`.
+    #[inline]
+    fn set_ray(&mut self, i: usize, ray: Option<PreparedRay>) {
+        match ray {
+            Some(r) => {
+                for a in 0..3 {
+                    self.o[a][i] = r.o[a];
+                    self.d[a][i] = r.d[a];
+                }
+                self.t_min[i] = r.t_min;
+                self.t_max[i] = r.t_max;
+                self.len[i] = r.len;
+                self.best_t[i] = r.t_max;
+            }
+            None => {
+                self.t_min[i] = f32::INFINITY;
+                self.t_max[i] = f32::NEG_INFINITY;
+            }
+        }
+    }
+
+    /// Sphere `slot`'s hits `t4` on the lanes in `mask` of pixels `i..i + 4`, kept where nearer
+    /// than the pixel's closest so far, or as near with a lower original index (the traversal's
+    /// rule). Ties are rare: lane by lane; otherwise the four lanes are updated at once.
+    #[inline]
+    fn take_hits(&mut self, i: usize, mask: u32, t4: Vec4, slot: u32, bvh: &SphereBvh) {
+        let best4 = Vec4::from_slice(&self.best_t[i..i + 4]);
+        let lanes = BVec4A::new(mask & 1 != 0, mask & 2 != 0, mask & 4 != 0, mask & 8 != 0);
+        if (t4.cmpeq(best4) & lanes).any() {
+            let mut m = mask;
+            while m != 0 {
+                let lane = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let (j, t) = (i + lane, t4[lane]);
+                let best = self.best_t[j];
+                let closer = t < best
+                    || (t == best && (self.best_slot[j] == NONE || bvh.index_of_slot(slot) < bvh.index_of_slot(self.best_slot[j])));
+                if closer {
+                    self.best_t[j] = t;
+                    self.best_slot[j] = slot;
+                }
+            }
+            return;
+        }
+        let closer = t4.cmplt(best4) & lanes;
+        Vec4::select(closer, t4, best4).write_to_slice(&mut self.best_t[i..i + 4]);
+        let c = closer.bitmask();
+        let closer = BVec4::new(c & 1 != 0, c & 2 != 0, c & 4 != 0, c & 8 != 0);
+        let slots = UVec4::from_slice(&self.best_slot[i..i + 4]);
+        UVec4::select(closer, UVec4::splat(slot), slots).write_to_slice(&mut self.best_slot[i..i + 4]);
     }
 }
 
@@ -531,7 +530,7 @@ mod tests {
             let rows = BAND_ROWS.min(h as usize - band * BAND_ROWS);
             s.begin(rows * wu);
             let ray = |i: usize| raygen.ray((i % wu) as u32, (band * BAND_ROWS + i / wu) as u32);
-            s.trace_cloud(&bins, &bvh, 0, band, (wu, rows), |(row, col), limit| {
+            s.trace_cloud(&bins, &bvh, 0, band, (wu, rows), Some(camera.position), |(row, col), limit| {
                 let r = ray(row * wu + col);
                 bvh.prepare_ray(r.origin, r.dir, r.t_min, limit.unwrap_or(r.t_max))
             });
