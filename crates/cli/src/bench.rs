@@ -373,7 +373,11 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     }
 
     let machine_start = load_average();
-    let options = RenderOptions { clip_capsule: args.clip_capsule, sphere_effects: !args.no_sphere_effects };
+    let options = RenderOptions {
+        clip_capsule: args.clip_capsule,
+        sphere_effects: !args.no_sphere_effects,
+        capsule_visibility: args.capsule_visibility,
+    };
     let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options };
     let mut modes: Vec<Mode> = Vec::new();
     for m in &args.modes {
@@ -514,6 +518,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
             "importance": scene.heuristic.importance,
             "clip_capsule": args.clip_capsule,
             "sphere_effects": !args.no_sphere_effects,
+            "capsule_visibility": args.capsule_visibility.name(),
         },
         "machine": machine,
         "static": static_summary,

@@ -4,6 +4,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use hybrid_core::{Frame, FrameSettings, Mode};
+use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
 use hybrid_gpu::{AdapterChoice, GpuContext, GpuError};
@@ -11,7 +12,7 @@ use hybrid_scene::{Camera, Scene, demo_scene, load_scene};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
-use crate::args::{BackendChoice, RenderArgs};
+use crate::args::{BackendChoice, CapsuleVisibilityChoice, RenderArgs};
 use crate::dump::{DumpInput, write_all};
 use crate::output::{ensure_dir, ensure_parent, write_bytes, write_png_rgba8};
 
@@ -59,7 +60,11 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     progress.stage("prepare");
     let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
     let backend = choose_backend(args.backend, args.quiet)?;
-    let options = RenderOptions { clip_capsule: args.clip_capsule, sphere_effects: !args.no_sphere_effects };
+    let options = RenderOptions {
+        clip_capsule: args.clip_capsule,
+        sphere_effects: !args.no_sphere_effects,
+        capsule_visibility: args.capsule_visibility,
+    };
     let mut renderer = AnyRenderer::new(&backend, &scene, &file, options)?;
     let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage))?;
     progress.finish();
@@ -98,6 +103,8 @@ pub struct RenderOptions {
     pub clip_capsule: bool,
     /// Not `--no-sphere-effects`.
     pub sphere_effects: bool,
+    /// `--capsule-visibility` (CPU backend).
+    pub capsule_visibility: CapsuleVisibilityChoice,
 }
 
 /// A renderer on either backend, for commands that render frames (`render`, `bench`).
@@ -114,6 +121,10 @@ impl<'s> AnyRenderer<'s> {
                 let mut r = CpuRenderer::new(scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
+                r.set_capsule_visibility(match options.capsule_visibility {
+                    CapsuleVisibilityChoice::Projected => PrimaryVisibility::Projected,
+                    CapsuleVisibilityChoice::Bvh => PrimaryVisibility::Bvh,
+                });
                 AnyRenderer::Cpu(Box::new(r))
             }
             Backend::Gpu(ctx) => {

@@ -145,6 +145,7 @@ fn millisecond_budget_is_reported_per_frame() {
     // Paper 2's defaults: unclipped capsule, spheres in the trace stage.
     assert_eq!(json["settings"]["clip_capsule"], false);
     assert_eq!(json["settings"]["sphere_effects"], true);
+    assert_eq!(json["settings"]["capsule_visibility"], "projected");
     let (header, rows) = csv(&out.join("frames.csv"));
     let b = col(&header, "budget_ms");
     assert!(rows.iter().filter(|r| r[col(&header, "mode")] == "hybrid").all(|r| r[b] == "0.5"));
@@ -154,11 +155,12 @@ fn millisecond_budget_is_reported_per_frame() {
 fn capsule_options_are_taken_and_recorded() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
-    let o = tiny_bench(&out, &["--modes", "hybrid", "--clip-capsule", "--no-sphere-effects"]);
+    let o = tiny_bench(&out, &["--modes", "hybrid", "--clip-capsule", "--no-sphere-effects", "--capsule-visibility", "bvh"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("bench.json")).unwrap()).unwrap();
     assert_eq!(json["settings"]["clip_capsule"], true);
     assert_eq!(json["settings"]["sphere_effects"], false);
+    assert_eq!(json["settings"]["capsule_visibility"], "bvh");
 }
 
 fn assert_bad_input(args: &[&str], out: &Path, needle: &str) {

@@ -13,7 +13,7 @@ use hybrid_scene::{Camera, Scene};
 use rayon::prelude::*;
 
 use crate::bvh::SceneBvh;
-use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, RtCapsule};
+use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule};
 use crate::prepare::PreparedScene;
 use crate::{blend, lighting, raster, trace};
 
@@ -45,6 +45,14 @@ pub struct CpuRenderer<'s> {
 }
 
 impl<'s> CpuRenderer<'s> {
+    /// How the capsule finds each primary ray's sphere ([`PrimaryVisibility`]; the frame is the
+    /// same either way). No effect on a scene without point clouds.
+    pub fn set_capsule_visibility(&mut self, visibility: PrimaryVisibility) {
+        if let Some(c) = self.capsule.as_mut() {
+            c.primary_visibility = visibility;
+        }
+    }
+
     /// Prepares `scene` once: world-space meshes, the triangle BVH, the capsule's sphere BVH.
     /// Fails only when a point cloud cannot be built into a sphere BVH.
     pub fn new(scene: &'s Scene) -> Result<Self, CapsuleError> {

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use hybrid_core::{FrameSettings, Mode, NO_OBJECT, RT_SCENE_OBJECT};
 use hybrid_cpu::bvh::SceneBvh;
+use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::{CpuRenderer, Frame};
 use hybrid_cpu::spheres::SphereBvh;
 use hybrid_cpu::trace::PrimaryRays;
@@ -90,6 +91,24 @@ fn clipping_capsule_rays_at_the_raster_depth_changes_nothing_visible() {
     // Behind polygons the clipped capsule reports misses where the unclipped one hit.
     let hits = |f: &Frame| f.rt_packed.as_ref().unwrap().texels.iter().filter(|t| t[0] != 0 || t[1] != 0).count();
     assert!(hits(&clipped) < hits(&unclipped), "{} vs {}", hits(&clipped), hits(&unclipped));
+}
+
+#[test]
+fn capsule_visibility_by_projection_or_bvh_gives_the_same_frame() {
+    let scene = tree_scene();
+    let mut renderer = CpuRenderer::new(&scene).unwrap();
+    for time in [0.0, 10.0] {
+        let camera = scene.camera_path.as_ref().unwrap().camera_at(&scene.camera, time);
+        let settings = FrameSettings { width: 160, height: 90, mode: Mode::Hybrid };
+        renderer.set_capsule_visibility(PrimaryVisibility::Projected);
+        let projected = renderer.render(&camera, settings, &mut |_| {});
+        renderer.set_capsule_visibility(PrimaryVisibility::Bvh);
+        let bvh = renderer.render(&camera, settings, &mut |_| {});
+        let packed = projected.rt_packed.as_ref().unwrap();
+        assert!(packed.texels.iter().filter(|t| t[3] != 0).count() > 1000, "t={time}: few capsule hits");
+        assert_eq!(projected.rt_packed, bvh.rt_packed, "t={time}: packed frames");
+        assert_eq!(projected.buffers.final_srgb, bvh.buffers.final_srgb, "t={time}: final images");
+    }
 }
 
 #[test]
