@@ -340,6 +340,9 @@ impl Cloud {
 thread_local! {
     /// Traversal stack for trace-stage queries (one per worker thread, no allocation per ray).
     static SECONDARY_STACK: std::cell::RefCell<TraversalStack> = std::cell::RefCell::new(TraversalStack::default());
+    /// A worker's buffers for the projected primary rays' bands (taken out for a band, put back
+    /// after it).
+    static BAND_SCRATCH: std::cell::Cell<projected::BandScratch> = std::cell::Cell::new(projected::BandScratch::default());
 }
 
 /// How the capsule finds each primary ray's closest sphere. Both give the same frame, bit for bit
@@ -632,7 +635,11 @@ impl PointCloudCapsule {
             .par_chunks_mut(wu * projected::BAND_ROWS)
             .with_max_len(1)
             .enumerate()
-            .map_init(projected::BandScratch::default, |s, (band, texels)| {
+            .map(|(band, texels)| {
+                // The worker's band buffers, reused from band to band and frame to frame (a
+                // rayon `map_init` value lives for one task only: here, one band).
+                let mut scratch = BAND_SCRATCH.take();
+                let s = &mut scratch;
                 let rows = texels.len() / wu;
                 let row0 = band * projected::BAND_ROWS;
                 let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((row0 + r) as u32)).collect();
@@ -656,6 +663,7 @@ impl PointCloudCapsule {
                         }
                     }
                 }
+                BAND_SCRATCH.set(scratch);
                 hits
             })
             .sum()
