@@ -622,8 +622,10 @@ impl PointCloudCapsule {
     fn render_projected(&mut self, request: &CapsuleRequest<'_>, raygen: &RayGen, clip: Option<&[f32]>, out: &mut PackedRtFrame) -> usize {
         let (w, h) = (request.width, request.height);
         self.bins.resize_with(self.clouds.len(), Default::default);
+        // With a clip depth, spheres behind the raster surface are not even filed.
+        let far = clip.map(|c| projected::FarDepth::new(c, &request.camera, w, h));
         for (bins, cloud) in self.bins.iter_mut().zip(&self.clouds) {
-            bins.bin(&cloud.bvh, &request.camera, w, h);
+            bins.bin(&cloud.bvh, &request.camera, w, h, far.as_ref());
         }
         let this = &*self;
         let wu = w as usize;

@@ -18,6 +18,7 @@
 //! served by the BVH ([`super::PrimaryVisibility::Bvh`]).
 
 use glam::{BVec4, BVec4A, Mat3, UVec4, Vec3, Vec4};
+use hybrid_core::depth_merge::{view_z_from_depth, view_z_from_depth_orthographic};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
@@ -110,12 +111,13 @@ impl Projector {
     /// (pixel centre, [`super::RayGen`]) may hit the sphere at `c`; `None` when there is none.
     #[cfg(test)]
     fn rect(&self, c: Vec3) -> Option<[u16; 4]> {
-        self.rects4(Vec4::splat(c.x), Vec4::splat(c.y), Vec4::splat(c.z))[0]
+        self.rects4(Vec4::splat(c.x), Vec4::splat(c.y), Vec4::splat(c.z))[0].map(|(r, _)| r)
     }
 
-    /// [`Projector::rect`] of four spheres at once (their centres' coordinates as lanes).
+    /// [`Projector::rect`] of four spheres at once (their centres' coordinates as lanes), each
+    /// with the view depth of the sphere's nearest point.
     #[inline]
-    fn rects4(&self, cx: Vec4, cy: Vec4, cz: Vec4) -> [Option<[u16; 4]>; 4] {
+    fn rects4(&self, cx: Vec4, cy: Vec4, cz: Vec4) -> [Option<([u16; 4], f32)>; 4] {
         let splat = Vec4::splat;
         let (px, py, pz) = (cx - splat(self.eye.x), cy - splat(self.eye.y), cz - splat(self.eye.z));
         let (ax, ay, az) = (self.rot.x_axis, self.rot.y_axis, self.rot.z_axis);
@@ -154,13 +156,14 @@ impl Projector {
         let row = |y: Vec4| (Vec4::ONE - y * splat(self.sy)) * splat(self.half_h) - splat(0.5);
         let (ca, cb, ra, rb) = (col(xl).to_array(), col(xh).to_array(), row(yl).to_array(), row(yh).to_array());
         let pad = pad.to_array();
+        let nearest = (dz - r).to_array();
         std::array::from_fn(|lane| {
             if kept & (1 << lane) == 0 {
                 return None;
             }
             let (x0, x1) = pixel_span(ca[lane], cb[lane], pad[lane], self.max_x);
             let (y0, y1) = pixel_span(ra[lane], rb[lane], pad[lane], self.max_y);
-            if x0 <= x1 && y0 <= y1 { Some([x0 as u16, x1 as u16, y0 as u16, y1 as u16]) } else { None }
+            if x0 <= x1 && y0 <= y1 { Some(([x0 as u16, x1 as u16, y0 as u16, y1 as u16], nearest[lane])) } else { None }
         })
     }
 }
@@ -179,6 +182,60 @@ fn pixel_span(a: f32, b: f32, pad: f32, max: f32) -> (i32, i32) {
     let first = if (ia as f32) < lo { ia + 1 } else { ia };
     let last = if (ib as f32) > hi { ib - 1 } else { ib };
     (first.max(0), last.min(max as i32))
+}
+
+/// Pixels per side of a [`FarDepth`] tile.
+const FAR_TILE: usize = 8;
+
+/// The farthest raster surface per 8×8-pixel tile, as view depth (+∞ where some pixel has nothing
+/// drawn), from the clip depth of a clipped capsule request: a sphere whose nearest point lies
+/// beyond it in every tile its rectangle touches cannot be hit by those pixels' clipped rays
+/// (their `t_max` ends at the raster surface), so it is not filed.
+#[derive(Debug, Default)]
+pub(super) struct FarDepth {
+    tiles_x: usize,
+    depth: Vec<f32>,
+}
+
+impl FarDepth {
+    /// `clip`: reversed-Z depth per pixel, row-major `w × h` (> 0: a surface; else nothing).
+    pub(super) fn new(clip: &[f32], camera: &Camera, w: u32, h: u32) -> Self {
+        let (w, h) = (w as usize, h as usize);
+        let tiles_x = w.div_ceil(FAR_TILE);
+        let (near, far) = camera.near_far();
+        let ortho = camera.is_orthographic();
+        let mut depth = vec![0.0f32; tiles_x * h.div_ceil(FAR_TILE)];
+        depth.par_chunks_mut(tiles_x).enumerate().for_each(|(ty, tiles)| {
+            // Reversed-Z: the farthest surface has the smallest depth; a pixel with nothing drawn
+            // (or a depth that is not a number) counts as 0, which culls nothing.
+            tiles.fill(f32::INFINITY);
+            for row in clip.chunks(w).skip(ty * FAR_TILE).take(FAR_TILE) {
+                for (x, &z) in row.iter().enumerate() {
+                    let t = &mut tiles[x / FAR_TILE];
+                    *t = t.min(if z > 0.0 { z } else { 0.0 });
+                }
+            }
+            for t in tiles.iter_mut() {
+                *t = if *t > 0.0 && t.is_finite() {
+                    let z_e = if ortho { view_z_from_depth_orthographic(*t, near, far) } else { view_z_from_depth(*t, near, far) };
+                    // A relative margin far above the rounding of the rays' clipped `t_max`.
+                    -z_e * (1.0 + DEPTH_SLACK)
+                } else {
+                    f32::INFINITY
+                };
+            }
+        });
+        Self { tiles_x, depth }
+    }
+
+    /// Whether a sphere whose nearest point has view depth `nearest`, with pixel rectangle `rect`,
+    /// lies beyond the raster surface in every tile the rectangle touches.
+    #[inline]
+    fn hides(&self, [x0, x1, y0, y1]: [u16; 4], nearest: f32) -> bool {
+        let (tx0, tx1) = (x0 as usize / FAR_TILE, x1 as usize / FAR_TILE);
+        (y0 as usize / FAR_TILE..=y1 as usize / FAR_TILE)
+            .all(|ty| self.depth[ty * self.tiles_x + tx0..=ty * self.tiles_x + tx1].iter().all(|&d| nearest > d))
+    }
 }
 
 /// One cloud's spheres filed by band for one frame (kept between frames for its allocations).
@@ -201,8 +258,9 @@ struct ChunkBins {
 }
 
 impl CloudBins {
-    /// Projects and files every sphere of `bvh` for `camera` at `w × h` (bands of [`BAND_ROWS`]).
-    pub(super) fn bin(&mut self, bvh: &SphereBvh, camera: &Camera, w: u32, h: u32) {
+    /// Projects and files every sphere of `bvh` for `camera` at `w × h` (bands of [`BAND_ROWS`]),
+    /// but those entirely behind the raster surface `far` gives (clipped rays stop there).
+    pub(super) fn bin(&mut self, bvh: &SphereBvh, camera: &Camera, w: u32, h: u32, far: Option<&FarDepth>) {
         let (lo, hi) = bvh.bounds();
         let proj = Projector::new(camera, w, h, bvh.radius(), lo.abs().max(hi.abs()).max_element());
         let n = bvh.len();
@@ -222,7 +280,10 @@ impl CloudBins {
                 let load = |v: &[f32]| Vec4::from_slice(&v[first..first + 4]);
                 let rects = proj.rects4(load(xs), load(ys), load(zs));
                 for (lane, rect) in rects.into_iter().enumerate().take(slots.end - first) {
-                    let Some([x0, x1, y0, y1]) = rect else { continue };
+                    let Some(([x0, x1, y0, y1], nearest)) = rect else { continue };
+                    if far.is_some_and(|f| f.hides([x0, x1, y0, y1], nearest)) {
+                        continue;
+                    }
                     let slot = first + lane;
                     ch.rects.push(Binned { c: Vec3::new(xs[slot], ys[slot], zs[slot]), slot: slot as u32, x0, x1, y0, y1 });
                     for b in y0 as usize / BAND_ROWS..=y1 as usize / BAND_ROWS {
@@ -521,7 +582,7 @@ mod tests {
         };
         let raygen = RayGen::new(&camera, w, h);
         let mut bins = CloudBins::default();
-        bins.bin(&bvh, &camera, w, h);
+        bins.bin(&bvh, &camera, w, h, None);
         assert!(bins.filed() > 1000, "{} spheres filed", bins.filed());
         let mut s = BandScratch::default();
         let wu = w as usize;
