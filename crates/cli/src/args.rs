@@ -68,12 +68,13 @@ pub struct RenderArgs {
     #[arg(long)]
     pub clip_capsule: bool,
     /// CPU backend: how the capsule finds each primary ray's sphere (the frame is the same bit
-    /// for bit). `projected` (default) projects every sphere to the pixels it may cover and tests
-    /// only those rays: fastest for small on-screen spheres, at the cost of touching every
-    /// sphere in view each frame. `bvh` traverses the sphere BVH per 8×8 tile (paper 2's way):
-    /// its cost follows rays, not spheres, so it suits a few large spheres. The GPU backend
-    /// always traverses its BVH.
-    #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Projected)]
+    /// for bit). `projected` projects every sphere to the pixels it may cover and tests only
+    /// those rays: fastest when there are fewer spheres than pixels, at the cost of touching
+    /// every sphere in view each frame. `bvh` traverses the sphere BVH per 8×8 tile (paper 2's
+    /// way): its cost follows rays, not spheres, so it wins with many more spheres than pixels.
+    /// `auto` (default) projects up to 2 points per pixel. The GPU backend always traverses
+    /// its BVH.
+    #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Auto)]
     pub capsule_visibility: CapsuleVisibilityChoice,
     /// Paper 2's behaviour: the point cloud only merges by depth, it casts no shadows on
     /// polygons and is not seen in reflections or refractions. Faster trace stage, at the cost
@@ -136,12 +137,13 @@ pub struct BenchArgs {
     #[arg(long)]
     pub clip_capsule: bool,
     /// CPU backend: how the capsule finds each primary ray's sphere (the frame is the same bit
-    /// for bit). `projected` (default) projects every sphere to the pixels it may cover and tests
-    /// only those rays: fastest for small on-screen spheres, at the cost of touching every
-    /// sphere in view each frame. `bvh` traverses the sphere BVH per 8×8 tile (paper 2's way):
-    /// its cost follows rays, not spheres, so it suits a few large spheres. The GPU backend
-    /// always traverses its BVH.
-    #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Projected)]
+    /// for bit). `projected` projects every sphere to the pixels it may cover and tests only
+    /// those rays: fastest when there are fewer spheres than pixels, at the cost of touching
+    /// every sphere in view each frame. `bvh` traverses the sphere BVH per 8×8 tile (paper 2's
+    /// way): its cost follows rays, not spheres, so it wins with many more spheres than pixels.
+    /// `auto` (default) projects up to 2 points per pixel. The GPU backend always traverses
+    /// its BVH.
+    #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Auto)]
     pub capsule_visibility: CapsuleVisibilityChoice,
     /// Paper 2's behaviour (as `render --no-sphere-effects`): the point cloud only merges by depth,
     /// no shadows on polygons, not in reflections or refractions. Faster trace stage, at the cost
@@ -211,6 +213,8 @@ pub enum BackendChoice {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum CapsuleVisibilityChoice {
+    /// `projected` up to 2 points per pixel, else `bvh`.
+    Auto,
     /// Spheres projected to pixel rectangles, each ray tested against the spheres over it.
     Projected,
     /// Each tile's rays traced through the sphere BVH.
@@ -220,6 +224,7 @@ pub enum CapsuleVisibilityChoice {
 impl CapsuleVisibilityChoice {
     pub fn name(self) -> &'static str {
         match self {
+            Self::Auto => "auto",
             Self::Projected => "projected",
             Self::Bvh => "bvh",
         }

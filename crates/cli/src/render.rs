@@ -122,6 +122,7 @@ impl<'s> AnyRenderer<'s> {
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
                 r.set_capsule_visibility(match options.capsule_visibility {
+                    CapsuleVisibilityChoice::Auto => PrimaryVisibility::Auto,
                     CapsuleVisibilityChoice::Projected => PrimaryVisibility::Projected,
                     CapsuleVisibilityChoice::Bvh => PrimaryVisibility::Bvh,
                 });

@@ -145,7 +145,7 @@ fn millisecond_budget_is_reported_per_frame() {
     // Paper 2's defaults: unclipped capsule, spheres in the trace stage.
     assert_eq!(json["settings"]["clip_capsule"], false);
     assert_eq!(json["settings"]["sphere_effects"], true);
-    assert_eq!(json["settings"]["capsule_visibility"], "projected");
+    assert_eq!(json["settings"]["capsule_visibility"], "auto");
     let (header, rows) = csv(&out.join("frames.csv"));
     let b = col(&header, "budget_ms");
     assert!(rows.iter().filter(|r| r[col(&header, "mode")] == "hybrid").all(|r| r[b] == "0.5"));

@@ -6,7 +6,9 @@
 //! report's runs per measurement (default 5; 3 for 10M). Give criterion a filter that matches
 //! nothing (`-- nomatch`) to get the one-shot report alone. The report also gives CPU-seconds
 //! (all threads) per build and per frame, fairer on a loaded machine than wall time, and an FNV-1a
-//! checksum of each frame's texels: it must not change when only speed work was done.
+//! checksum of each frame's texels: it must not change when only speed work was done. Frames are
+//! traced with the default `PrimaryVisibility::Auto`, then the same frames the other way
+//! (projection or BVH traversal), which must give the same checksums.
 
 use std::hint::black_box;
 use std::path::Path;
@@ -193,8 +195,10 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
     let (full_ms, hits, full_sum) = trace(None);
     let cpu_per_frame = (cpu_seconds() - cpu0) / runs as f64;
     let (clip_ms, clip_hits, clip_sum) = trace(Some(&wall));
-    // The same frames by BVH traversal (PrimaryVisibility::Bvh): the same checksums, other speed.
-    capsule.primary_visibility = PrimaryVisibility::Bvh;
+    // The same frames the other way (projection or BVH traversal): the same checksums, other speed.
+    let chosen = capsule.resolved_visibility(W, H);
+    let other = if chosen == PrimaryVisibility::Projected { PrimaryVisibility::Bvh } else { PrimaryVisibility::Projected };
+    capsule.primary_visibility = other;
     let mut trace = |clip: Option<&[f32]>| {
         let req = CapsuleRequest { camera, width: W, height: H, clip_depth: clip };
         let stats: Vec<_> = (0..runs).map(|_| capsule.render(&req, &mut frame)).collect();
@@ -217,8 +221,8 @@ fn report(label: &str, points: Vec<Vec3>, runs: usize) {
         "{label}: {n} points, {threads} threads | build {build:.0} ms | trace+pack 1920x1080 {full_ms:.1} ms = {:.2} Mrays/s ({hits} hits) | \
          clipped by wall {clip_ms:.1} ms = {:.2} Mrays/s ({clip_hits} hits), speed-up {:.2}x | ray gen + block D + P alone (1 thread) {pack_ms:.1} ms | \
          memory {:.1} MB = {:.1} B/point | unclipped: {:.2} Mrays per CPU-second | build {build_cpu_ms:.0} CPU-ms | \
-         checksums {full_sum:016x} {clip_sum:016x} | BVH traversal instead: {bvh_ms:.1} ms ({:.2}x the time), clipped {bvh_clip_ms:.1} ms, \
-         checksums {bvh_sum:016x} {bvh_clip_sum:016x}",
+         checksums {full_sum:016x} {clip_sum:016x} | primary visibility: auto chose {chosen:?}; {other:?} instead: {bvh_ms:.1} ms \
+         ({:.2}x the time), clipped {bvh_clip_ms:.1} ms, checksums {bvh_sum:016x} {bvh_clip_sum:016x}",
         rays / full_ms / 1e3,
         rays / clip_ms / 1e3,
         full_ms / clip_ms,

@@ -506,3 +506,19 @@ fn projected_and_bvh_primary_visibility_give_identical_frames() {
         assert_eq!(differ, 0, "{name}: {differ} texels differ");
     }
 }
+
+#[test]
+fn auto_visibility_projects_up_to_two_points_per_pixel() {
+    let points: Vec<Vec3> = (0..2000).map(|i| Vec3::new((i % 50) as f32 * 0.1, (i / 50) as f32 * 0.1, -3.0)).collect();
+    let mut capsule = PointCloudCapsule::new(&[cloud(points, 0.02, PointColoring::Height)], lights(), Environment::default()).unwrap();
+    assert_eq!(capsule.primary_visibility, PrimaryVisibility::Auto);
+    // 2000 points: 1000 pixels or more project, fewer traverse.
+    assert_eq!(capsule.resolved_visibility(40, 25), PrimaryVisibility::Projected);
+    assert_eq!(capsule.resolved_visibility(40, 24), PrimaryVisibility::Bvh);
+    capsule.primary_visibility = PrimaryVisibility::Projected;
+    assert_eq!(capsule.resolved_visibility(4, 4), PrimaryVisibility::Projected);
+    // Wider than the bins address: traversal whatever is asked.
+    assert_eq!(capsule.resolved_visibility(70_000, 1), PrimaryVisibility::Bvh);
+    capsule.primary_visibility = PrimaryVisibility::Bvh;
+    assert_eq!(capsule.resolved_visibility(4000, 4000), PrimaryVisibility::Bvh);
+}
