@@ -6,11 +6,13 @@
 //! `cargo run --release -p hybrid-cpu --example frame_stages -- SCENE [FRAMES] [WIDTHxHEIGHT]`
 //! (default 10 frames at 1920x1080). Environment: `MODE=all|rt-only|raster` (default hybrid),
 //! `CLIP=1` traces the capsule after the raster with rays clipped at its depth, `NO_SPHERES=1`
-//! leaves the point cloud out of the trace stage.
+//! leaves the point cloud out of the trace stage, `VIS=auto|projected|bvh` picks how the capsule
+//! finds its primary rays' spheres (default auto).
 
 use std::process::ExitCode;
 
 use hybrid_core::{FrameSettings, Mode};
+use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::CpuRenderer;
 
 fn main() -> ExitCode {
@@ -52,6 +54,12 @@ fn run() -> Result<(), String> {
     let mut renderer = CpuRenderer::new(&scene).map_err(|e| format!("{path}: {e}"))?;
     renderer.clip_capsule_at_raster_depth = std::env::var_os("CLIP").is_some();
     renderer.spheres_in_trace = std::env::var_os("NO_SPHERES").is_none();
+    renderer.set_capsule_visibility(match std::env::var("VIS").as_deref() {
+        Err(_) | Ok("auto") => PrimaryVisibility::Auto,
+        Ok("projected") => PrimaryVisibility::Projected,
+        Ok("bvh") => PrimaryVisibility::Bvh,
+        Ok(other) => return Err(format!("VIS must be auto, projected or bvh, not `{other}`")),
+    });
     let settings = FrameSettings { width, height, mode };
     // Per stage: frame, capsule, raster (with lighting), lighting, trace, blend.
     let mut times: [Vec<f64>; 6] = Default::default();
