@@ -43,6 +43,10 @@ const WIDE_RADII: f32 = 1.5;
 /// of the plane's distance plus the radius, is culled (no ray's `t` range reaches it).
 const DEPTH_SLACK: f32 = 1e-2;
 
+/// Relative margin of a sphere's nearest possible hit distance (its computed `t` can be a few
+/// ulps below the exact one).
+const NEAREST_SLACK: f32 = 1e-5;
+
 /// Largest image side the bins can address.
 pub(super) const MAX_SIDE: u32 = u16::MAX as u32;
 
@@ -380,6 +384,9 @@ impl BandScratch {
         let r = bvh.radius();
         let r2 = r * r;
         for b in bins.band(band) {
+            // With one origin, no hit on this sphere is nearer than |centre − origin| − r (less a
+            // relative margin for rounding): pixels whose closest hit is already nearer skip it.
+            let nearest = shared_origin.map_or(f32::NEG_INFINITY, |o| (b.c - o).length() * (1.0 - NEAREST_SLACK) - r);
             for y in (b.y0 as usize).max(y_lo)..(b.y1 as usize + 1).min(y_hi) {
                 let row = y - y_lo;
                 let base = row * w;
@@ -396,13 +403,17 @@ impl BandScratch {
                         }
                     }
                     let load = |v: &[f32]| Vec4::from_slice(&v[i..i + 4]);
+                    let lane_mask = (1u32 << lanes) - 1;
+                    if load(&self.best_t).cmplt(Vec4::splat(nearest)).bitmask() & lane_mask == lane_mask {
+                        continue;
+                    }
                     let o = match shared_origin {
                         Some(o) => [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
                         None => [load(&self.o[0]), load(&self.o[1]), load(&self.o[2])],
                     };
                     let d = [load(&self.d[0]), load(&self.d[1]), load(&self.d[2])];
                     let (t4, mask) = sphere_hits4(b.c, r2, o, d, load(&self.t_min), load(&self.t_max));
-                    let mask = mask & ((1 << lanes) - 1);
+                    let mask = mask & lane_mask;
                     if mask == 0 {
                         continue;
                     }
