@@ -28,7 +28,7 @@ use crate::spheres::{PreparedRay, SphereBvh, sphere_hits4};
 /// under two bands at the cost of a larger per-band working set.
 pub(super) const BAND_ROWS: usize = 8;
 /// Spheres per binning task.
-const BIN_CHUNK: usize = 32 * 1024;
+const BIN_CHUNK: usize = 4 * 1024;
 /// Fixed margin in pixels around a sphere's projected bounds. The bounds are exact up to f32
 /// rounding of the slopes (relative 10⁻⁶, a thousandth of a pixel at 1920 columns), as is each
 /// ray's direction, so a tenth of a pixel is ample; the rounding of positions, which grows with
@@ -246,6 +246,9 @@ impl FarDepth {
 #[derive(Debug, Default)]
 pub(super) struct CloudBins {
     chunks: Vec<ChunkBins>,
+    /// Chunk indices, nearest first (by their nearest filed sphere): each band takes its spheres
+    /// about front to back, so more of them find their pixels already nearer and skip them.
+    order: Vec<usize>,
     band_rows: usize,
 }
 
@@ -259,6 +262,8 @@ struct ChunkBins {
     records: Vec<Binned>,
     start: Vec<u32>,
     cursor: Vec<u32>,
+    /// The smallest view depth of a filed sphere's nearest point (+∞ when none is filed).
+    nearest: f32,
 }
 
 impl CloudBins {
@@ -277,6 +282,7 @@ impl CloudBins {
         self.chunks.par_iter_mut().enumerate().with_max_len(1).for_each(|(k, ch)| {
             let slots = k * BIN_CHUNK..((k + 1) * BIN_CHUNK).min(n);
             ch.rects.clear();
+            ch.nearest = f32::INFINITY;
             ch.start.clear();
             ch.start.resize(bands + 1, 0);
             // Four slots at a time (the centre arrays are padded past the last sphere).
@@ -288,6 +294,7 @@ impl CloudBins {
                     if far.is_some_and(|f| f.hides([x0, x1, y0, y1], nearest)) {
                         continue;
                     }
+                    ch.nearest = ch.nearest.min(nearest);
                     let slot = first + lane;
                     ch.rects.push(Binned { c: Vec3::new(xs[slot], ys[slot], zs[slot]), slot: slot as u32, x0, x1, y0, y1 });
                     for b in y0 as usize / BAND_ROWS..=y1 as usize / BAND_ROWS {
@@ -308,11 +315,14 @@ impl CloudBins {
                 }
             }
         });
+        self.order.clear();
+        self.order.extend(0..n_chunks);
+        self.order.sort_by(|&a, &b| self.chunks[a].nearest.total_cmp(&self.chunks[b].nearest));
     }
 
-    /// The spheres filed under band `band`.
+    /// The spheres filed under band `band`, chunk by chunk nearest first.
     fn band(&self, band: usize) -> impl Iterator<Item = &Binned> {
-        self.chunks.iter().flat_map(move |ch| match (ch.start.get(band), ch.start.get(band + 1)) {
+        self.order.iter().map(|&k| &self.chunks[k]).flat_map(move |ch| match (ch.start.get(band), ch.start.get(band + 1)) {
             (Some(&a), Some(&b)) => &ch.records[a as usize..b as usize],
             _ => &[],
         })
