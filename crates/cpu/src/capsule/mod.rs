@@ -447,8 +447,13 @@ impl PointCloudCapsule {
     /// The surface of sphere `slot` of cloud `ci` at `position`, hit by a ray along `dir`: the
     /// shading inputs the capsule uses (albedo as diffuse and ambient, the cloud's specular).
     fn sphere_surface(&self, ci: usize, slot: u32, position: Vec3, dir: Vec3) -> Surface {
+        self.sphere_surface_at(ci, slot, self.clouds[ci].bvh.center_of_slot(slot), position, dir)
+    }
+
+    /// [`PointCloudCapsule::sphere_surface`] given the sphere's centre.
+    #[inline]
+    fn sphere_surface_at(&self, ci: usize, slot: u32, center: Vec3, position: Vec3, dir: Vec3) -> Surface {
         let cloud = &self.clouds[ci];
-        let center = cloud.bvh.center_of_slot(slot);
         let normal = ((position - center) / cloud.bvh.radius()).normalize_or(-dir);
         let albedo = cloud.albedo(slot, center);
         Surface {
@@ -507,7 +512,13 @@ impl PointCloudCapsule {
 
     /// The shaded colour of sphere `slot` of cloud `ci` hit at `t` along `ray`.
     fn shade_hit(&self, ray: &PrimaryRay, t: f32, ci: usize, slot: u32) -> Vec3 {
-        let s = self.sphere_surface(ci, slot, ray.origin + ray.dir * t, ray.dir);
+        self.shade_hit_at(ray, t, ci, slot, self.clouds[ci].bvh.center_of_slot(slot))
+    }
+
+    /// [`PointCloudCapsule::shade_hit`] given the sphere's centre.
+    #[inline]
+    fn shade_hit_at(&self, ray: &PrimaryRay, t: f32, ci: usize, slot: u32, center: Vec3) -> Vec3 {
+        let s = self.sphere_surface_at(ci, slot, center, ray.origin + ray.dir * t, ray.dir);
         self.lights.local_lighting(&s, -ray.dir)
     }
 }
@@ -678,11 +689,11 @@ impl PointCloudCapsule {
                 let mut hits = 0;
                 for (row, (texels, best)) in texels.chunks_mut(wu).zip(s.best.chunks(wu)).enumerate() {
                     for (col, (texel, best)) in texels.iter_mut().zip(best).enumerate() {
-                        if let Some((t, ci, slot)) = *best {
+                        if let Some((t, ci, slot, center)) = *best {
                             hits += 1;
                             let ray = primary(row, col);
                             // Block D then block P, as in the BVH path.
-                            *texel = encode_hit(this.shade_hit(&ray, t, ci, slot), raygen.depth(&ray, t));
+                            *texel = encode_hit(this.shade_hit_at(&ray, t, ci, slot, center), raygen.depth(&ray, t));
                         }
                     }
                 }

@@ -351,8 +351,11 @@ pub(super) struct BandScratch {
     len: Vec<f32>,
     best_t: Vec<f32>,
     best_slot: Vec<u32>,
-    /// Per pixel: (t in the primary ray's units, cloud, slot) of the closest sphere so far.
-    pub(super) best: Vec<Option<(f32, usize, u32)>>,
+    /// The closest sphere's centre per pixel (from its record: shading then reads no centre
+    /// array at a random slot).
+    best_c: [Vec<f32>; 3],
+    /// Per pixel: (t in the primary ray's units, cloud, slot, centre) of the closest sphere so far.
+    pub(super) best: Vec<Option<(f32, usize, u32, Vec3)>>,
 }
 
 impl BandScratch {
@@ -362,7 +365,12 @@ impl BandScratch {
         self.best.resize(pixels, None);
         // Four-lane loads start at any covered pixel: three pixels of padding.
         let padded = pixels + 3;
-        for v in self.o.iter_mut().chain(self.d.iter_mut()).chain([&mut self.t_min, &mut self.t_max, &mut self.len, &mut self.best_t]) {
+        for v in self.o.iter_mut().chain(self.d.iter_mut()).chain(self.best_c.iter_mut()).chain([
+            &mut self.t_min,
+            &mut self.t_max,
+            &mut self.len,
+            &mut self.best_t,
+        ]) {
             v.resize(padded, 0.0);
         }
         self.best_slot.resize(padded, NONE);
@@ -427,7 +435,7 @@ impl BandScratch {
                     if mask == 0 {
                         continue;
                     }
-                    self.take_hits(i, mask, t4, b.slot, bvh);
+                    self.take_hits(i, mask, t4, b, bvh);
                 }
             }
         }
@@ -436,7 +444,8 @@ impl BandScratch {
         for i in (0..pixels).filter(|&i| self.best_slot[i] != NONE) {
             let t = self.best_t[i] / self.len[i];
             if self.best[i].is_none_or(|b| t < b.0) {
-                self.best[i] = Some((t, ci, self.best_slot[i]));
+                let c = Vec3::new(self.best_c[0][i], self.best_c[1][i], self.best_c[2][i]);
+                self.best[i] = Some((t, ci, self.best_slot[i], c));
             }
         }
     }
@@ -463,11 +472,12 @@ impl BandScratch {
         }
     }
 
-    /// Sphere `slot`'s hits `t4` on the lanes in `mask` of pixels `i..i + 4`, kept where nearer
+    /// Sphere `b`'s hits `t4` on the lanes in `mask` of pixels `i..i + 4`, kept where nearer
     /// than the pixel's closest so far, or as near with a lower original index (the traversal's
     /// rule). Ties are rare: lane by lane; otherwise the four lanes are updated at once.
     #[inline]
-    fn take_hits(&mut self, i: usize, mask: u32, t4: Vec4, slot: u32, bvh: &SphereBvh) {
+    fn take_hits(&mut self, i: usize, mask: u32, t4: Vec4, b: &Binned, bvh: &SphereBvh) {
+        let slot = b.slot;
         let best4 = Vec4::from_slice(&self.best_t[i..i + 4]);
         let lanes = BVec4A::new(mask & 1 != 0, mask & 2 != 0, mask & 4 != 0, mask & 8 != 0);
         if (t4.cmpeq(best4) & lanes).any() {
@@ -482,16 +492,24 @@ impl BandScratch {
                 if closer {
                     self.best_t[j] = t;
                     self.best_slot[j] = slot;
+                    for a in 0..3 {
+                        self.best_c[a][j] = b.c[a];
+                    }
                 }
             }
             return;
         }
         let closer = t4.cmplt(best4) & lanes;
+        let closer4 = closer;
         Vec4::select(closer, t4, best4).write_to_slice(&mut self.best_t[i..i + 4]);
         let c = closer.bitmask();
         let closer = BVec4::new(c & 1 != 0, c & 2 != 0, c & 4 != 0, c & 8 != 0);
         let slots = UVec4::from_slice(&self.best_slot[i..i + 4]);
         UVec4::select(closer, UVec4::splat(slot), slots).write_to_slice(&mut self.best_slot[i..i + 4]);
+        for a in 0..3 {
+            let c = Vec4::from_slice(&self.best_c[a][i..i + 4]);
+            Vec4::select(closer4, Vec4::splat(b.c[a]), c).write_to_slice(&mut self.best_c[a][i..i + 4]);
+        }
     }
 }
 
@@ -619,7 +637,10 @@ mod tests {
             for i in 0..rows * wu {
                 let r = ray(i);
                 let want = closest_hit_brute_force(&centers, 0.08, r.origin, r.dir, r.t_min, r.t_max);
-                let got = s.best[i].map(|(t, _, slot)| (t.to_bits(), bvh.index_of_slot(slot)));
+                let got = s.best[i].map(|(t, _, slot, c)| {
+                    assert_eq!(c, bvh.center_of_slot(slot));
+                    (t.to_bits(), bvh.index_of_slot(slot))
+                });
                 assert_eq!(got, want.map(|(t, idx)| (t.to_bits(), idx)), "pixel {i} of band {band}");
                 checked += want.is_some() as usize;
             }
