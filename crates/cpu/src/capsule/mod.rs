@@ -9,7 +9,11 @@
 //!
 //! [`PointCloudCapsule`] builds **one sphere BVH per cloud** (each cloud has its own radius; a
 //! scene usually has one cloud) and traces them in turn with a shrinking `t_max`, so the closest
-//! hit over all clouds wins.
+//! hit over all clouds wins. A primary ray finds its sphere one of two ways with the same result,
+//! bit for bit ([`PrimaryVisibility`]): through the BVH, 8×8 tiles at a time, or (module
+//! `projected`) among the spheres whose projected bounds cover its pixel. The trace stage's
+//! secondary rays ([`PointCloudCapsule::closest_surface`], [`PointCloudCapsule::occluded`])
+//! always use the BVH.
 
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::thread::JoinHandle;
