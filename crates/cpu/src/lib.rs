@@ -11,4 +11,7 @@ pub mod raster;
 pub mod spheres;
 pub mod trace;
 
+#[cfg(test)]
+mod test_rng;
+
 pub use prepare::PreparedScene;

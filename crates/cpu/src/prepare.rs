@@ -352,17 +352,7 @@ fn bilinear_frac(t: &Texture, uv: Vec2, frac: Vec2, level: usize) -> Vec4 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Deterministic pseudo-random numbers (xorshift).
-    struct Rng(u64);
-    impl Rng {
-        fn f(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
+    use crate::test_rng::Rng;
 
     #[test]
     fn untextured_shortcut_matches_the_general_path_bit_for_bit() {

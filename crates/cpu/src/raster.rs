@@ -993,6 +993,7 @@ fn shade(st: &ShadeTri, ts: &TriangleSurface<'_>, x: u32, y: u32) -> Surface {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_rng::Rng;
 
     fn vpt(w: u32, h: u32) -> Viewport {
         Viewport { vp: Mat4::IDENTITY, width: w, height: h, gx: 1.0 + 2.0 * GUARD_PX / w as f32, gy: 1.0 + 2.0 * GUARD_PX / h as f32 }
@@ -1010,15 +1011,8 @@ mod tests {
         c
     }
 
-    /// Deterministic pseudo-random numbers (xorshift) for the fuzz-style tests.
-    struct Rng(u64);
+    /// Coordinates for the fuzz-style tests.
     impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            self.0
-        }
         fn coord(&mut self, max_px: i32) -> i32 {
             // Half the time exactly on a pixel centre or pixel corner, to hit the tie cases.
             let px = (self.next() % max_px as u64) as i32;

@@ -518,18 +518,8 @@ mod tests {
     use super::*;
     use crate::capsule::RayGen;
     use crate::spheres::closest_hit_brute_force;
+    use crate::test_rng::Rng;
     use hybrid_scene::Projection;
-
-    /// Deterministic pseudo-random numbers in [0, 1) (xorshift).
-    struct Rng(u64);
-    impl Rng {
-        fn f(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
 
     /// Every pixel whose ray hits a sphere (brute force, the BVH's test) lies in the sphere's
     /// rectangle, for spheres all over and around the frustum (beside, behind, across the near
