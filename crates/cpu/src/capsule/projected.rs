@@ -11,6 +11,11 @@
 //! force), so exactly what [`SphereBvh::closest_hit_slot_with`] returns for the same ray; a test
 //! compares whole frames bit for bit.
 //!
+//! Work skipped without changing the result: a pixel's ray is made only when a sphere first
+//! covers it; the bins are taken nearest run of spheres first, and a sphere skips four pixels
+//! whose closest hits are all nearer than it can be; with a clip depth ([`FarDepth`]), spheres
+//! behind the raster surface of every tile they touch are not filed at all.
+//!
 //! The trade-off: no BVH nodes are visited and no ray is set up for a pixel that no sphere covers,
 //! but every sphere in the view frustum is projected and tested, hidden ones included (a BVH ray
 //! stops at its first hit). It wins when the spheres are small on screen (a few pixels each, as
