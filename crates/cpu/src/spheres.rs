@@ -18,7 +18,7 @@
 //!   project the centre on the ray and compare the squared distance of the centre from the ray
 //!   with r². Ties in t go to the lower index, so
 //!   the result equals brute force whatever the traversal order. Rays with `t_min ≥ 0` use a
-//!   cheaper slab test that enters every child the padded one enters ([`Ray::slab4`]).
+//!   cheaper slab test that enters every child the padded one enters (`Ray::slab4`).
 //! - **Batches** ([`SphereBvh::closest_hits_batch`], a screen tile's primary rays): rays from one
 //!   origin share the top of the tree. The batch's frustum, bounded by its rays' extreme inverse
 //!   directions, is tested against the nodes once, giving a cut of ≤ 32 subtrees that holds
