@@ -505,6 +505,17 @@ fn projected_and_bvh_primary_visibility_give_identical_frames() {
         let differ = projected.texels.iter().zip(&bvh.texels).filter(|(a, b)| a != b).count();
         assert_eq!(differ, 0, "{name}: {differ} texels differ");
     }
+    // Tiny and odd sizes (one pixel, a band shorter than 8 rows, a row shorter than 4 pixels),
+    // the same frames both ways.
+    for (w, h) in [(1, 1), (3, 2), (5, 9), (17, 1)] {
+        let mut capsule = PointCloudCapsule::new(&one, lights(), Environment::default()).unwrap();
+        let request = CapsuleRequest { camera: framing_camera(&points), width: w, height: h, clip_depth: None };
+        capsule.primary_visibility = PrimaryVisibility::Projected;
+        let (projected, _) = render_sync(&mut capsule, &request);
+        capsule.primary_visibility = PrimaryVisibility::Bvh;
+        let (bvh, _) = render_sync(&mut capsule, &request);
+        assert!(projected == bvh, "{w}×{h}: frames differ");
+    }
 }
 
 #[test]
