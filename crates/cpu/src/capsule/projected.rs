@@ -163,34 +163,36 @@ impl Projector {
         // Pixel-centre coordinates (RayGen: view x = (2(col + ½)/w − 1)/sx, view y = (1 − 2(row + ½)/h)/sy).
         let col = |x: Vec4| (x * splat(self.sx) + Vec4::ONE) * splat(self.half_w) - splat(0.5);
         let row = |y: Vec4| (Vec4::ONE - y * splat(self.sy)) * splat(self.half_h) - splat(0.5);
-        let (ca, cb, ra, rb) = (col(xl).to_array(), col(xh).to_array(), row(yl).to_array(), row(yh).to_array());
-        let pad = pad.to_array();
+        let (x0, x1) = pixel_spans4(col(xl), col(xh), pad, self.max_x);
+        let (y0, y1) = pixel_spans4(row(yl), row(yh), pad, self.max_y);
+        let on_screen = kept & (x0.cmple(x1) & y0.cmple(y1)).bitmask();
+        let (x0, x1, y0, y1) = (x0.to_array(), x1.to_array(), y0.to_array(), y1.to_array());
         let nearest = (dz - r).to_array();
         std::array::from_fn(|lane| {
-            if kept & (1 << lane) == 0 {
-                return None;
-            }
-            let (x0, x1) = pixel_span(ca[lane], cb[lane], pad[lane], self.max_x);
-            let (y0, y1) = pixel_span(ra[lane], rb[lane], pad[lane], self.max_y);
-            if x0 <= x1 && y0 <= y1 { Some(([x0 as u16, x1 as u16, y0 as u16, y1 as u16], nearest[lane])) } else { None }
+            // Whole numbers in [0, 65535]: the casts are exact.
+            (on_screen & (1 << lane) != 0).then(|| ([x0[lane] as u16, x1[lane] as u16, y0[lane] as u16, y1[lane] as u16], nearest[lane]))
         })
     }
 }
 
-/// The integers within `pad` of the interval between `a` and `b` (either order), clamped to
-/// `[0, max]` (empty when first > last), without library calls. A NaN bound or pad (not
-/// computable) gives the whole `[0, max]`.
+/// Per lane, the whole numbers within `pad` of the interval between `a` and `b` (either order),
+/// clamped to `[0, max]`: `(first, last)` as floats, empty when first > last. A NaN bound or pad
+/// (not computable) gives the whole `[0, max]`. No library calls: the bounds are clamped to
+/// `[0, max + 1]` (`max` < 2²²; an interval below 0 is marked empty first) and rounded by adding
+/// and removing 2²³, exact for such values.
 #[inline(always)]
-fn pixel_span(a: f32, b: f32, pad: f32, max: f32) -> (i32, i32) {
-    let (lo, hi) = if a <= b { (a - pad, b + pad) } else { (b - pad, a + pad) };
-    // `max`/`min` take NaN to the other operand.
-    let (lo, hi) = (lo.max(-1.0), hi.min(max + 1.0));
-    let (lo, hi) = if a.is_nan() || b.is_nan() { (-1.0, max + 1.0) } else { (lo, hi) };
-    // In this range the truncating casts are exact and never saturate.
-    let (ia, ib) = (lo as i32, hi as i32);
-    let first = if (ia as f32) < lo { ia + 1 } else { ia };
-    let last = if (ib as f32) > hi { ib - 1 } else { ib };
-    (first.max(0), last.min(max as i32))
+fn pixel_spans4(a: Vec4, b: Vec4, pad: Vec4, max: f32) -> (Vec4, Vec4) {
+    let splat = Vec4::splat;
+    let nan = a.cmpne(a) | b.cmpne(b) | pad.cmpne(pad);
+    let lo = Vec4::select(nan, Vec4::ZERO, a.min(b) - pad);
+    let hi = Vec4::select(nan, splat(max), a.max(b) + pad);
+    let below = hi.cmplt(Vec4::ZERO);
+    let (lo, hi) = (lo.clamp(Vec4::ZERO, splat(max + 1.0)), hi.clamp(Vec4::ZERO, splat(max + 1.0)));
+    const BIG: f32 = 8_388_608.0;
+    let (rl, rh) = ((lo + splat(BIG)) - splat(BIG), (hi + splat(BIG)) - splat(BIG));
+    let first = Vec4::select(rl.cmplt(lo), rl + Vec4::ONE, rl);
+    let last = Vec4::select(rh.cmpgt(hi), rh - Vec4::ONE, rh);
+    (first, Vec4::select(below, splat(-1.0), last.min(splat(max))))
 }
 
 /// Pixels per side of a [`FarDepth`] tile.
@@ -579,6 +581,31 @@ mod tests {
         }
         assert!(hits_checked > 2000, "only {hits_checked} hit pixels checked");
         assert!(tight > 100, "only {tight} tight rectangles");
+    }
+
+    /// The four-lane span equals ceil / floor of the padded interval, clamped, for ordinary,
+    /// reversed, infinite and NaN bounds.
+    #[test]
+    fn pixel_spans_round_outwards_and_clamp() {
+        let mut rng = Rng(3);
+        let special = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -3.0, -0.5, 0.0, 7.0, 7.5, 63.0, 63.5, 64.0, 1e9];
+        for k in 0..20_000 {
+            let pick = |rng: &mut Rng| if k % 3 == 0 { special[(rng.f() * special.len() as f32) as usize] } else { rng.f() * 80.0 - 8.0 };
+            let (a, b, pad, max) = (pick(&mut rng), pick(&mut rng), [0.1, 0.6, f32::NAN][k % 3], 63.0f32);
+            let (first, last) = pixel_spans4(Vec4::splat(a), Vec4::splat(b), Vec4::splat(pad), max);
+            let (first, last) = (first.x, last.x);
+            if a.is_nan() || b.is_nan() || pad.is_nan() {
+                assert_eq!((first, last), (0.0, max), "{a} {b} {pad}");
+                continue;
+            }
+            let (lo, hi) = (a.min(b) as f64 - pad as f64, a.max(b) as f64 + pad as f64);
+            let want = (lo.ceil().max(0.0), hi.floor().min(max as f64));
+            if want.0 <= want.1 {
+                assert_eq!((first as f64, last as f64), want, "{a} {b} {pad}");
+            } else {
+                assert!(first > last, "{a} {b} {pad}: ({first}, {last}) should be empty");
+            }
+        }
     }
 
     #[test]
