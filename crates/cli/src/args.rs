@@ -62,25 +62,8 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Beyond paper 2: trace the point-cloud capsule after the raster, clipping its rays at the
-    /// polygons' depth. Saves the rays that would end behind polygons, at the cost of running
-    /// the capsule after (not beside) the raster.
-    #[arg(long)]
-    pub clip_capsule: bool,
-    /// CPU backend: how the capsule finds each primary ray's sphere (the frame is the same bit
-    /// for bit). `projected` projects every sphere to the pixels it may cover and tests only
-    /// those rays: fastest when there are fewer spheres than pixels, at the cost of touching
-    /// every sphere in view each frame. `bvh` traverses the sphere BVH per 8×8 tile (paper 2's
-    /// way): its cost follows rays, not spheres, so it wins with many more spheres than pixels.
-    /// `auto` (default) projects up to 2 points per pixel. The GPU backend always traverses
-    /// its BVH.
-    #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Auto)]
-    pub capsule_visibility: CapsuleVisibilityChoice,
-    /// Paper 2's behaviour: the point cloud only merges by depth, it casts no shadows on
-    /// polygons and is not seen in reflections or refractions. Faster trace stage, at the cost
-    /// of those effects.
-    #[arg(long)]
-    pub no_sphere_effects: bool,
+    #[command(flatten)]
+    pub capsule: CapsuleArgs,
     /// No progress bar.
     #[arg(short, long)]
     pub quiet: bool,
@@ -131,8 +114,18 @@ pub struct BenchArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    #[command(flatten)]
+    pub capsule: CapsuleArgs,
+    /// No progress lines on stderr.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// Point-cloud capsule switches shared by `render` and `bench` (beyond paper 2).
+#[derive(Debug, Args)]
+pub struct CapsuleArgs {
     /// Beyond paper 2: trace the point-cloud capsule after the raster, clipping its rays at the
-    /// polygons' depth (as `render --clip-capsule`): fewer capsule rays, at the cost of running
+    /// polygons' depth. Saves the rays that would end behind polygons, at the cost of running
     /// the capsule after (not beside) the raster.
     #[arg(long)]
     pub clip_capsule: bool,
@@ -145,14 +138,11 @@ pub struct BenchArgs {
     /// its BVH.
     #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Auto)]
     pub capsule_visibility: CapsuleVisibilityChoice,
-    /// Paper 2's behaviour (as `render --no-sphere-effects`): the point cloud only merges by depth,
-    /// no shadows on polygons, not in reflections or refractions. Faster trace stage, at the cost
+    /// Paper 2's behaviour: the point cloud only merges by depth, it casts no shadows on
+    /// polygons and is not seen in reflections or refractions. Faster trace stage, at the cost
     /// of those effects.
     #[arg(long)]
     pub no_sphere_effects: bool,
-    /// No progress lines on stderr.
-    #[arg(short, long)]
-    pub quiet: bool,
 }
 
 /// Heuristic overrides shared by `render` and `bench`.

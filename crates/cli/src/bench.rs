@@ -373,11 +373,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     }
 
     let machine_start = load_average();
-    let options = RenderOptions {
-        clip_capsule: args.clip_capsule,
-        sphere_effects: !args.no_sphere_effects,
-        capsule_visibility: args.capsule_visibility,
-    };
+    let options = RenderOptions::from(&args.capsule);
     let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options };
     let mut modes: Vec<Mode> = Vec::new();
     for m in &args.modes {
@@ -516,9 +512,9 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
             "budget": budget_desc,
             "policy": policy_name(scene.heuristic.policy),
             "importance": scene.heuristic.importance,
-            "clip_capsule": args.clip_capsule,
-            "sphere_effects": !args.no_sphere_effects,
-            "capsule_visibility": args.capsule_visibility.name(),
+            "clip_capsule": options.clip_capsule,
+            "sphere_effects": options.sphere_effects,
+            "capsule_visibility": options.capsule_visibility.name(),
         },
         "machine": machine,
         "static": static_summary,

@@ -12,7 +12,7 @@ use hybrid_scene::{Camera, Scene, demo_scene, load_scene};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
-use crate::args::{BackendChoice, CapsuleVisibilityChoice, RenderArgs};
+use crate::args::{BackendChoice, CapsuleArgs, CapsuleVisibilityChoice, RenderArgs};
 use crate::dump::{DumpInput, write_all};
 use crate::output::{ensure_dir, ensure_parent, write_bytes, write_png_rgba8};
 
@@ -60,11 +60,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     progress.stage("prepare");
     let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
     let backend = choose_backend(args.backend, args.quiet)?;
-    let options = RenderOptions {
-        clip_capsule: args.clip_capsule,
-        sphere_effects: !args.no_sphere_effects,
-        capsule_visibility: args.capsule_visibility,
-    };
+    let options = RenderOptions::from(&args.capsule);
     let mut renderer = AnyRenderer::new(&backend, &scene, &file, options)?;
     let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage))?;
     progress.finish();
@@ -105,6 +101,12 @@ pub struct RenderOptions {
     pub sphere_effects: bool,
     /// `--capsule-visibility` (CPU backend).
     pub capsule_visibility: CapsuleVisibilityChoice,
+}
+
+impl From<&CapsuleArgs> for RenderOptions {
+    fn from(a: &CapsuleArgs) -> Self {
+        Self { clip_capsule: a.clip_capsule, sphere_effects: !a.no_sphere_effects, capsule_visibility: a.capsule_visibility }
+    }
 }
 
 /// A renderer on either backend, for commands that render frames (`render`, `bench`).
