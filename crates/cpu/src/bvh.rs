@@ -489,8 +489,12 @@ impl SceneBvh {
                     // distances are ≥ t_min ≥ 0 for the rays we trace, so their bits order like
                     // the floats; a wrong order would only cost time); stack all but the
                     // nearest, visit that one.
+                    // Children missed get key 0 (branch-free: the mask bits are unpredictable);
+                    // a hit's key is never 0, as the root (node 0) is nobody's child.
                     let near = near.to_array();
-                    let key = |c: usize| if mask >> c & 1 != 0 { (near[c].to_bits() as u64) << 32 | n.child[c] as u64 } else { 0 };
+                    let key = |c: usize| {
+                        ((near[c].to_bits() as u64) << 32 | n.child[c] as u64) & (u64::from(mask >> c & 1)).wrapping_neg()
+                    };
                     let mut k = [key(0), key(1), key(2), key(3)];
                     let mut swap = |a: usize, b: usize| {
                         let (x, y) = (k[a], k[b]);

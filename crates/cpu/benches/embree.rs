@@ -1,0 +1,345 @@
+//! Our triangle BVH against Embree 3's single-ray API, on the trace bench's scenes and rays, in
+//! one run (issue 3: "trace-stage throughput per ray kind ≥ 1.0× Embree single-ray").
+//!
+//! Optional: it links Debian's Embree (`apt-get install libembree-dev`, 3.13) and is built only
+//! with the `embree` feature:
+//!
+//! ```text
+//! cargo bench -p hybrid-cpu --features embree --bench embree
+//! ```
+//!
+//! For each scene of `trace_scenes` (the synthetic ~255K-triangle room and Dabrovic Sponza) it
+//! builds both BVHs (Embree: one triangle geometry per mesh, `RTC_BUILD_QUALITY_MEDIUM`, the
+//! default), then traces the same rays with both, alternating passes so both see the same
+//! moments of a shared machine:
+//! - shadow rays: ours `any_hit_attenuation_cached` (the trace stage's path) and without the
+//!   cache, Embree `rtcOccluded1`;
+//! - reflection rays: ours `closest_hit`, Embree `rtcIntersect1`.
+//!
+//! Rays go out in chunks of 256 on rayon's pool (2 threads here), for both. Each line gives the
+//! best of `TRACE_PASSES` (default 5) wall-clock passes, and the ratio ours / Embree. The answers
+//! are compared ray by ray (blocked or not; closest distance within 1e-3 relative), so the two
+//! trace the same work.
+//!
+//! `EMBREE_CONFIG` is passed to `rtcNewDevice` (default `threads=2`): `verbose=1` prints the
+//! ISA Embree picked, `isa=sse2` (or `sse4.2`, `avx`, `avx2`) forces one.
+
+mod trace_scenes;
+
+use std::ffi::{CString, c_char, c_uint, c_void};
+use std::time::Instant;
+
+use glam::Vec3;
+use hybrid_cpu::PreparedScene;
+use hybrid_cpu::bvh::{SceneBvh, ShadowCache};
+use rayon::prelude::*;
+use trace_scenes::{load_average, rays, scenes};
+
+// --- Embree 3.13 C API (rtcore.h), the parts used here ---------------------------------------
+
+type RtcDevice = *mut c_void;
+type RtcScene = *mut c_void;
+type RtcGeometry = *mut c_void;
+
+const RTC_GEOMETRY_TYPE_TRIANGLE: c_uint = 0;
+const RTC_BUFFER_TYPE_INDEX: c_uint = 0;
+const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
+const RTC_FORMAT_UINT3: c_uint = 0x5003;
+const RTC_FORMAT_FLOAT3: c_uint = 0x9003;
+const RTC_BUILD_QUALITY_MEDIUM: c_uint = 1;
+const RTC_INVALID_GEOMETRY_ID: c_uint = u32::MAX;
+
+/// `struct RTCRay` (16-byte aligned).
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RtcRay {
+    org: [f32; 3],
+    tnear: f32,
+    dir: [f32; 3],
+    time: f32,
+    tfar: f32,
+    mask: c_uint,
+    id: c_uint,
+    flags: c_uint,
+}
+
+/// `struct RTCHit` with `RTC_MAX_INSTANCE_LEVEL_COUNT` = 1 (Debian's build).
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RtcHit {
+    ng: [f32; 3],
+    u: f32,
+    v: f32,
+    prim_id: c_uint,
+    geom_id: c_uint,
+    inst_id: [c_uint; 1],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct RtcRayHit {
+    ray: RtcRay,
+    hit: RtcHit,
+}
+
+/// `struct RTCIntersectContext` with one instance level and no minimum width (Debian's build:
+/// `RTC_MAX_INSTANCE_LEVEL_COUNT 1`, `RTC_MIN_WIDTH 0` in `rtcore_config.h`).
+#[repr(C)]
+struct RtcIntersectContext {
+    flags: c_uint,
+    filter: *const c_void,
+    inst_id: [c_uint; 1],
+}
+
+impl RtcIntersectContext {
+    /// `rtcInitIntersectContext` (an inline function in the header).
+    fn new() -> Self {
+        Self { flags: 0, filter: std::ptr::null(), inst_id: [RTC_INVALID_GEOMETRY_ID] }
+    }
+}
+
+#[link(name = "embree3")]
+unsafe extern "C" {
+    fn rtcNewDevice(config: *const c_char) -> RtcDevice;
+    fn rtcReleaseDevice(device: RtcDevice);
+    fn rtcGetDeviceError(device: RtcDevice) -> c_uint;
+    fn rtcNewScene(device: RtcDevice) -> RtcScene;
+    fn rtcSetSceneBuildQuality(scene: RtcScene, quality: c_uint);
+    fn rtcCommitScene(scene: RtcScene);
+    fn rtcReleaseScene(scene: RtcScene);
+    fn rtcNewGeometry(device: RtcDevice, kind: c_uint) -> RtcGeometry;
+    fn rtcSetNewGeometryBuffer(
+        geometry: RtcGeometry,
+        kind: c_uint,
+        slot: c_uint,
+        format: c_uint,
+        byte_stride: usize,
+        item_count: usize,
+    ) -> *mut c_void;
+    fn rtcCommitGeometry(geometry: RtcGeometry);
+    fn rtcAttachGeometry(scene: RtcScene, geometry: RtcGeometry) -> c_uint;
+    fn rtcReleaseGeometry(geometry: RtcGeometry);
+    fn rtcIntersect1(scene: RtcScene, context: *mut RtcIntersectContext, rayhit: *mut RtcRayHit);
+    fn rtcOccluded1(scene: RtcScene, context: *mut RtcIntersectContext, ray: *mut RtcRay);
+}
+
+/// An Embree device (owned; released on drop).
+struct Device(RtcDevice);
+
+impl Device {
+    fn new(config: &str) -> Device {
+        let config = CString::new(config).expect("EMBREE_CONFIG holds a NUL byte");
+        // SAFETY: FFI; `config` is a NUL-terminated string that outlives the call.
+        let device = unsafe { rtcNewDevice(config.as_ptr()) };
+        assert!(!device.is_null(), "rtcNewDevice failed (error {})", unsafe {
+            // SAFETY: FFI; a null device asks for the thread's last device-creation error.
+            rtcGetDeviceError(std::ptr::null_mut())
+        });
+        Device(device)
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: FFI; the device was created by `rtcNewDevice` and every scene made from it has
+        // been released (scenes borrow the device).
+        unsafe { rtcReleaseDevice(self.0) }
+    }
+}
+
+/// A committed Embree scene (released on drop).
+struct Scene<'d> {
+    scene: RtcScene,
+    _device: &'d Device,
+}
+
+// SAFETY: Embree documents `rtcIntersect1`/`rtcOccluded1` on a committed scene as thread-safe;
+// nothing here changes the scene after `rtcCommitScene`.
+unsafe impl Send for Scene<'_> {}
+// SAFETY: as for `Send`.
+unsafe impl Sync for Scene<'_> {}
+
+impl<'d> Scene<'d> {
+    /// One triangle geometry per world-space mesh, build quality medium (Embree's default).
+    fn build(device: &'d Device, prepared: &PreparedScene) -> Scene<'d> {
+        // SAFETY: FFI on a live device. The buffers Embree returns are sized by us (`itemCount`
+        // items of `byteStride` bytes, Embree pads them for its SIMD loads) and written only within
+        // that size, through slices made from them; each geometry is committed before it is
+        // attached and released after (the scene keeps its own reference).
+        unsafe {
+            let scene = rtcNewScene(device.0);
+            rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
+            for mesh in prepared.meshes.iter().filter(|m| !m.indices.is_empty()) {
+                let geometry = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_TRIANGLE);
+                let v = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, mesh.positions.len())
+                    as *mut [f32; 3];
+                let i = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, mesh.indices.len())
+                    as *mut [u32; 3];
+                assert!(!v.is_null() && !i.is_null(), "rtcSetNewGeometryBuffer failed");
+                let (v, i) = (std::slice::from_raw_parts_mut(v, mesh.positions.len()), std::slice::from_raw_parts_mut(i, mesh.indices.len()));
+                v.iter_mut().zip(&mesh.positions).for_each(|(d, p)| *d = p.to_array());
+                i.copy_from_slice(&mesh.indices);
+                rtcCommitGeometry(geometry);
+                rtcAttachGeometry(scene, geometry);
+                rtcReleaseGeometry(geometry);
+            }
+            rtcCommitScene(scene);
+            assert_eq!(rtcGetDeviceError(device.0), 0, "Embree reported an error building the scene");
+            Scene { scene, _device: device }
+        }
+    }
+
+    /// `rtcOccluded1` on `origin + t·dir`, `0 < t < t_max`.
+    fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+        let mut ray = RtcRay {
+            org: origin.to_array(),
+            tnear: 0.0,
+            dir: dir.to_array(),
+            time: 0.0,
+            tfar: t_max,
+            mask: u32::MAX,
+            id: 0,
+            flags: 0,
+        };
+        let mut context = RtcIntersectContext::new();
+        // SAFETY: FFI on a committed scene with a valid, aligned context and ray.
+        unsafe { rtcOccluded1(self.scene, &mut context, &mut ray) };
+        // Embree sets tfar to −inf when the ray is blocked.
+        ray.tfar < 0.0
+    }
+
+    /// `rtcIntersect1`: the closest hit distance, if any.
+    fn closest_hit(&self, origin: Vec3, dir: Vec3) -> Option<f32> {
+        let mut rh = RtcRayHit {
+            ray: RtcRay {
+                org: origin.to_array(),
+                tnear: 0.0,
+                dir: dir.to_array(),
+                time: 0.0,
+                tfar: f32::INFINITY,
+                mask: u32::MAX,
+                id: 0,
+                flags: 0,
+            },
+            hit: RtcHit { ng: [0.0; 3], u: 0.0, v: 0.0, prim_id: 0, geom_id: RTC_INVALID_GEOMETRY_ID, inst_id: [RTC_INVALID_GEOMETRY_ID] },
+        };
+        let mut context = RtcIntersectContext::new();
+        // SAFETY: FFI on a committed scene with a valid, aligned context and ray/hit.
+        unsafe { rtcIntersect1(self.scene, &mut context, &mut rh) };
+        (rh.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some(rh.ray.tfar)
+    }
+}
+
+impl Drop for Scene<'_> {
+    fn drop(&mut self) {
+        // SAFETY: FFI; the scene was made by `rtcNewScene` and no query is running.
+        unsafe { rtcReleaseScene(self.scene) }
+    }
+}
+
+// --- the comparison ------------------------------------------------------------------------
+
+/// Best wall-clock seconds of `ours` and `theirs` over `passes`, run alternately.
+fn race(passes: usize, mut ours: impl FnMut(), mut theirs: impl FnMut()) -> (f64, f64) {
+    let (mut a, mut b) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..passes {
+        let t = Instant::now();
+        ours();
+        a = a.min(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        theirs();
+        b = b.min(t.elapsed().as_secs_f64());
+    }
+    (a, b)
+}
+
+fn line(scene: &str, what: &str, items: usize, unit: &str, (ours, theirs): (f64, f64)) {
+    let m = items as f64 * 1e-6;
+    println!(
+        "{scene:>10} {what:<24} ours {:>8.2} ms = {:>6.2} M{unit}/s   Embree {:>8.2} ms = {:>6.2} M{unit}/s   ours/Embree {:>5.2}×  [load {}]",
+        ours * 1e3,
+        m / ours,
+        theirs * 1e3,
+        m / theirs,
+        theirs / ours,
+        load_average()
+    );
+}
+
+fn main() {
+    // `cargo bench` passes `--bench`; there is nothing to filter.
+    let passes = std::env::var("TRACE_PASSES").ok().and_then(|p| p.parse().ok()).unwrap_or(5);
+    let config = std::env::var("EMBREE_CONFIG").unwrap_or_else(|_| "threads=2".into());
+    let device = Device::new(&config);
+    println!("rayon threads {}, Embree config {config:?}, best of {passes} alternating passes", rayon::current_num_threads());
+    for (name, scene, light) in scenes() {
+        let prepared = PreparedScene::new(&scene);
+        let tris = prepared.triangles.len();
+        let build = race(passes, || drop(SceneBvh::build(&prepared)), || drop(Scene::build(&device, &prepared)));
+        line(name, &format!("build {}K triangles", tris / 1000), tris, "tris", build);
+
+        let bvh = SceneBvh::build(&prepared);
+        let embree = Scene::build(&device, &prepared);
+        let r = rays(&prepared, &bvh, light);
+
+        // The same answers, ray by ray.
+        let blocked: Vec<(bool, bool)> =
+            r.shadow.par_iter().map(|&(o, d, t)| (bvh.any_hit_attenuation(&prepared, o, d, t) < 1.0, embree.occluded(o, d, t))).collect();
+        let differ = blocked.iter().filter(|(a, b)| a != b).count();
+        println!("{name:>10} shadow rays: {} blocked by ours, {} by Embree, {differ} differ", blocked.iter().filter(|p| p.0).count(), blocked.iter().filter(|p| p.1).count());
+        let hits: Vec<(Option<f32>, Option<f32>)> =
+            r.reflection.par_iter().map(|&(o, d)| (bvh.closest_hit(o, d, 0.0, f32::INFINITY).map(|h| h.t), embree.closest_hit(o, d))).collect();
+        let differ = hits
+            .iter()
+            .filter(|(a, b)| match (a, b) {
+                (Some(a), Some(b)) => (a - b).abs() > 1e-3 * a.abs().max(b.abs()),
+                (a, b) => a.is_some() != b.is_some(),
+            })
+            .count();
+        println!("{name:>10} reflection rays: {} hit by ours, {} by Embree, {differ} differ", hits.iter().filter(|p| p.0.is_some()).count(), hits.iter().filter(|p| p.1.is_some()).count());
+
+        let chunks = |f: &(dyn Fn(Vec3, Vec3, f32) -> f32 + Sync)| -> f32 {
+            r.shadow.par_chunks(256).with_max_len(1).map(|c| c.iter().map(|&(o, d, t)| f(o, d, t)).sum::<f32>()).sum()
+        };
+        let shadow_cached = || {
+            std::hint::black_box(
+                r.shadow
+                    .par_chunks(256)
+                    .with_max_len(1)
+                    .map(|c| {
+                        let mut cache = ShadowCache::default();
+                        c.iter().map(|&(o, d, t)| bvh.any_hit_attenuation_cached(&prepared, o, d, t, &mut cache)).sum::<f32>()
+                    })
+                    .sum::<f32>(),
+            );
+        };
+        let shadow_embree = || {
+            std::hint::black_box(chunks(&|o, d, t| if embree.occluded(o, d, t) { 0.0 } else { 1.0 }));
+        };
+        line(name, "shadow rays, cache", r.shadow.len(), "rays", race(passes, shadow_cached, shadow_embree));
+        let shadow_plain = || {
+            std::hint::black_box(chunks(&|o, d, t| bvh.any_hit_attenuation(&prepared, o, d, t)));
+        };
+        line(name, "shadow rays, no cache", r.shadow.len(), "rays", race(passes, shadow_plain, shadow_embree));
+
+        let reflect_ours = || {
+            std::hint::black_box(
+                r.reflection
+                    .par_chunks(256)
+                    .with_max_len(1)
+                    .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
+                    .sum::<f32>(),
+            );
+        };
+        let reflect_embree = || {
+            std::hint::black_box(
+                r.reflection
+                    .par_chunks(256)
+                    .with_max_len(1)
+                    .map(|c| c.iter().filter_map(|&(o, d)| embree.closest_hit(o, d)).sum::<f32>())
+                    .sum::<f32>(),
+            );
+        };
+        line(name, "reflection rays", r.reflection.len(), "rays", race(passes, reflect_ours, reflect_embree));
+    }
+}
