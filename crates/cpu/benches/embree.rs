@@ -173,10 +173,11 @@ impl<'d> Scene<'d> {
                 let geometry = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_TRIANGLE);
                 let v = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, mesh.positions.len())
                     as *mut [f32; 3];
-                let i = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, mesh.indices.len())
-                    as *mut [u32; 3];
+                let i =
+                    rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, mesh.indices.len()) as *mut [u32; 3];
                 assert!(!v.is_null() && !i.is_null(), "rtcSetNewGeometryBuffer failed");
-                let (v, i) = (std::slice::from_raw_parts_mut(v, mesh.positions.len()), std::slice::from_raw_parts_mut(i, mesh.indices.len()));
+                let (v, i) =
+                    (std::slice::from_raw_parts_mut(v, mesh.positions.len()), std::slice::from_raw_parts_mut(i, mesh.indices.len()));
                 v.iter_mut().zip(&mesh.positions).for_each(|(d, p)| *d = p.to_array());
                 i.copy_from_slice(&mesh.indices);
                 rtcCommitGeometry(geometry);
@@ -191,16 +192,8 @@ impl<'d> Scene<'d> {
 
     /// `rtcOccluded1` on `origin + t·dir`, `0 < t < t_max`.
     fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        let mut ray = RtcRay {
-            org: origin.to_array(),
-            tnear: 0.0,
-            dir: dir.to_array(),
-            time: 0.0,
-            tfar: t_max,
-            mask: u32::MAX,
-            id: 0,
-            flags: 0,
-        };
+        let mut ray =
+            RtcRay { org: origin.to_array(), tnear: 0.0, dir: dir.to_array(), time: 0.0, tfar: t_max, mask: u32::MAX, id: 0, flags: 0 };
         let mut context = RtcIntersectContext::new();
         // SAFETY: FFI on a committed scene with a valid, aligned context and ray.
         unsafe { rtcOccluded1(self.scene, &mut context, &mut ray) };
@@ -286,9 +279,16 @@ fn main() {
         let blocked: Vec<(bool, bool)> =
             r.shadow.par_iter().map(|&(o, d, t)| (bvh.any_hit_attenuation(&prepared, o, d, t) < 1.0, embree.occluded(o, d, t))).collect();
         let differ = blocked.iter().filter(|(a, b)| a != b).count();
-        println!("{name:>10} shadow rays: {} blocked by ours, {} by Embree, {differ} differ", blocked.iter().filter(|p| p.0).count(), blocked.iter().filter(|p| p.1).count());
-        let hits: Vec<(Option<f32>, Option<f32>)> =
-            r.reflection.par_iter().map(|&(o, d)| (bvh.closest_hit(o, d, 0.0, f32::INFINITY).map(|h| h.t), embree.closest_hit(o, d))).collect();
+        println!(
+            "{name:>10} shadow rays: {} blocked by ours, {} by Embree, {differ} differ",
+            blocked.iter().filter(|p| p.0).count(),
+            blocked.iter().filter(|p| p.1).count()
+        );
+        let hits: Vec<(Option<f32>, Option<f32>)> = r
+            .reflection
+            .par_iter()
+            .map(|&(o, d)| (bvh.closest_hit(o, d, 0.0, f32::INFINITY).map(|h| h.t), embree.closest_hit(o, d)))
+            .collect();
         let differ = hits
             .iter()
             .filter(|(a, b)| match (a, b) {
@@ -296,7 +296,11 @@ fn main() {
                 (a, b) => a.is_some() != b.is_some(),
             })
             .count();
-        println!("{name:>10} reflection rays: {} hit by ours, {} by Embree, {differ} differ", hits.iter().filter(|p| p.0.is_some()).count(), hits.iter().filter(|p| p.1.is_some()).count());
+        println!(
+            "{name:>10} reflection rays: {} hit by ours, {} by Embree, {differ} differ",
+            hits.iter().filter(|p| p.0.is_some()).count(),
+            hits.iter().filter(|p| p.1.is_some()).count()
+        );
 
         let chunks = |f: &(dyn Fn(Vec3, Vec3, f32) -> f32 + Sync)| -> f32 {
             r.shadow.par_chunks(256).with_max_len(1).map(|c| c.iter().map(|&(o, d, t)| f(o, d, t)).sum::<f32>()).sum()

@@ -492,9 +492,7 @@ impl SceneBvh {
                     // Children missed get key 0 (branch-free: the mask bits are unpredictable);
                     // a hit's key is never 0, as the root (node 0) is nobody's child.
                     let near = near.to_array();
-                    let key = |c: usize| {
-                        ((near[c].to_bits() as u64) << 32 | n.child[c] as u64) & (u64::from(mask >> c & 1)).wrapping_neg()
-                    };
+                    let key = |c: usize| ((near[c].to_bits() as u64) << 32 | n.child[c] as u64) & (u64::from(mask >> c & 1)).wrapping_neg();
                     let mut k = [key(0), key(1), key(2), key(3)];
                     let mut swap = |a: usize, b: usize| {
                         let (x, y) = (k[a], k[b]);
@@ -585,8 +583,11 @@ impl SceneBvh {
     ) -> f32 {
         // A cache from another tree only costs time: any pack of this tree hit by an opaque lane
         // is a true blocker.
+        if self.nodes.is_empty() {
+            return 1.0;
+        }
+        let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
         if cache.leaf != EMPTY_SLOT && leaf_packs(cache.leaf).end <= self.packs.len() {
-            let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
             let range = leaf_packs(cache.leaf);
             for (pack, &shadow) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]) {
                 let (_, _, _, hit) = intersect4(pack, &r, 0.0, t_max);
@@ -596,7 +597,7 @@ impl SceneBvh {
             }
         }
         let mut att = 1.0f32;
-        self.for_each_pack_hit(origin, dir, 0.0, t_max, |leaf, slot0, mut mask, u, v| {
+        self.for_each_pack_hit_with(&r, 0.0, t_max, |leaf, slot0, mut mask, u, v| {
             if mask >> 4 != 0 {
                 // An opaque blocker.
                 cache.leaf = leaf;
@@ -607,12 +608,7 @@ impl SceneBvh {
                 let lane = mask.trailing_zeros() as usize & 3;
                 mask &= mask - 1;
                 let tr = self.slot_shadow[slot0 + lane];
-                let tr = if tr == SHADOW_EVALUATE {
-                    let s = prepared.surface_at(self.slot_ref[slot0 + lane], Vec3::new(1.0 - u[lane] - v[lane], u[lane], v[lane]), 0.0);
-                    1.0 - s.opacity
-                } else {
-                    tr
-                };
+                let tr = if tr == SHADOW_EVALUATE { self.textured_transparency(prepared, slot0 + lane, u[lane], v[lane]) } else { tr };
                 att *= tr;
                 if att <= 0.0 {
                     return false;
@@ -621,6 +617,14 @@ impl SceneBvh {
             true
         });
         att.max(0.0)
+    }
+
+    /// Shadow transparency (1 − opacity) of the slot's triangle at corner weights (1 − u − v,
+    /// u, v), from its textures. Out of line: it is rare, and inlined it would crowd the
+    /// traversal loop.
+    #[inline(never)]
+    fn textured_transparency(&self, prepared: &PreparedScene, slot: usize, u: f32, v: f32) -> f32 {
+        1.0 - prepared.surface_at(self.slot_ref[slot], Vec3::new(1.0 - u - v, u, v), 0.0).opacity
     }
 
     /// Calls `f(leaf reference, first slot of the pack, mask, u, v)` for every pack with triangles hit on the
@@ -639,34 +643,29 @@ impl SceneBvh {
         if self.nodes.is_empty() {
             return;
         }
-        ANY_STACK.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut stack) => self.for_each_pack_hit_with(&mut stack, origin, dir, t_min, t_max, f),
-            Err(_) => self.for_each_pack_hit_with(&mut Vec::new(), origin, dir, t_min, t_max, f),
-        })
+        self.for_each_pack_hit_with(&RayPre::new(Vec3A::from(origin), Vec3A::from(dir)), t_min, t_max, f)
     }
 
     #[inline(always)]
-    fn for_each_pack_hit_with(
-        &self,
-        stack: &mut Vec<u32>,
-        origin: Vec3,
-        dir: Vec3,
-        t_min: f32,
-        t_max: f32,
-        mut f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
-    ) {
-        let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
-        stack.clear();
+    fn for_each_pack_hit_with(&self, r: &RayPre, t_min: f32, t_max: f32, mut f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool) {
+        // The nodes still to visit are `stack[..sp]`: a fixed array indexed modulo its
+        // power-of-two length, so that no bounds or capacity check sits in the loop (a `Vec`'s
+        // push and pop were measurably slower). It cannot fill: see `ANY_STACK_LEN`.
+        let mut stack = [0u32; ANY_STACK_LEN];
+        const WRAP: usize = ANY_STACK_LEN - 1;
+        let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             if cur & LEAF == 0 {
                 let n = &self.nodes[cur as usize];
-                let (_, mut mask) = node_hits(n, &r, t_min, t_max);
+                let (_, mut mask) = node_hits(n, r, t_min, t_max);
                 if mask != 0 {
                     cur = n.child[mask.trailing_zeros() as usize & 3];
                     mask &= mask - 1;
                     while mask != 0 {
-                        stack.push(n.child[mask.trailing_zeros() as usize & 3]);
+                        debug_assert!(sp < ANY_STACK_LEN, "any-hit stack overflow");
+                        stack[sp & WRAP] = n.child[mask.trailing_zeros() as usize & 3];
+                        sp += 1;
                         mask &= mask - 1;
                     }
                     continue;
@@ -675,7 +674,7 @@ impl SceneBvh {
                 let range = leaf_packs(cur);
                 let first = range.start;
                 for (k, (pack, &shadow)) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]).enumerate() {
-                    let (_, u, v, hit) = intersect4(pack, &r, t_min, t_max);
+                    let (_, u, v, hit) = intersect4(pack, r, t_min, t_max);
                     let hit = hit & shadow as u32 & 15;
                     if hit != 0 {
                         let opaque = hit & (shadow as u32 >> 4);
@@ -686,19 +685,24 @@ impl SceneBvh {
                     }
                 }
             }
-            match stack.pop() {
-                Some(c) => cur = c,
-                None => return,
+            if sp == 0 {
+                return;
             }
+            sp -= 1;
+            cur = stack[sp & WRAP];
         }
     }
 }
 
+/// Length of the any-hit traversal stack (a power of two). A 4-wide node stacks at most three
+/// children, and a path is at most `MAX_DEPTH` (56) nodes deep plus the ≤ 8 levels
+/// `Packer::leaf` adds above an oversized leaf, so at most 192 entries are ever stacked.
+const ANY_STACK_LEN: usize = 256;
+
 thread_local! {
-    /// Per-thread traversal stacks, reused from ray to ray (a fixed-size array would be
-    /// zero-filled for every ray).
+    /// Per-thread closest-hit traversal stack, reused from ray to ray (its 64-bit entries
+    /// would make a large array to zero for every ray).
     static HIT_STACK: std::cell::RefCell<Vec<u64>> = const { std::cell::RefCell::new(Vec::new()) };
-    static ANY_STACK: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Möller–Trumbore on four triangles: `(t, u, v, mask of lanes hit with t_min < t < t_max)`;

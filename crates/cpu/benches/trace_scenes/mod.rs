@@ -191,4 +191,3 @@ pub fn report(name: &str, what: &str, items: usize, unit: &str, (cpu, wall): (f6
         load_average()
     );
 }
-
