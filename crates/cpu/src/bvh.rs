@@ -464,16 +464,19 @@ impl SceneBvh {
         }
         HIT_STACK.with(|cell| match cell.try_borrow_mut() {
             Ok(mut stack) => self.closest_hit_with(&mut stack, origin, dir, t_min, t_max),
-            Err(_) => self.closest_hit_with(&mut Vec::new(), origin, dir, t_min, t_max),
+            Err(_) => self.closest_hit_with(&mut [0; STACK_LEN], origin, dir, t_min, t_max),
         })
     }
 
-    fn closest_hit_with(&self, stack: &mut Vec<u64>, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
+    fn closest_hit_with(&self, stack: &mut [u64; STACK_LEN], origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
         let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
         let mut best_t = t_max;
         let mut best = usize::MAX;
         let mut best_uv = (0.0f32, 0.0f32);
-        stack.clear();
+        // Entries still to visit are `stack[..sp]`, indexed modulo the power-of-two length (no
+        // bounds check; it cannot fill, see `STACK_LEN`).
+        const WRAP: usize = STACK_LEN - 1;
+        let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             if cur & LEAF == 0 {
@@ -488,9 +491,8 @@ impl SceneBvh {
                     // branch-free sorting network on `distance bits << 32 | child` keys (entry
                     // distances are ≥ t_min ≥ 0 for the rays we trace, so their bits order like
                     // the floats; a wrong order would only cost time); stack all but the
-                    // nearest, visit that one.
-                    // Children missed get key 0 (branch-free: the mask bits are unpredictable);
-                    // a hit's key is never 0, as the root (node 0) is nobody's child.
+                    // nearest, visit that one. Children missed get key 0, also without a
+                    // branch (a hit's key is never 0: the root, node 0, is nobody's child).
                     let near = near.to_array();
                     let key = |c: usize| ((near[c].to_bits() as u64) << 32 | n.child[c] as u64) & (u64::from(mask >> c & 1)).wrapping_neg();
                     let mut k = [key(0), key(1), key(2), key(3)];
@@ -505,10 +507,12 @@ impl SceneBvh {
                     swap(1, 3);
                     swap(1, 2);
                     let hits = mask.count_ones() as usize;
-                    // A fixed-size copy (no call) cut back to the hits.
-                    let len = stack.len();
-                    stack.extend_from_slice(&k[..3]);
-                    stack.truncate(len + hits - 1);
+                    // All three written, the stack grown by the hits but the nearest.
+                    debug_assert!(sp + 3 <= STACK_LEN, "closest-hit stack overflow");
+                    for (j, &key) in k[..3].iter().enumerate() {
+                        stack[(sp + j) & WRAP] = key;
+                    }
+                    sp += hits - 1;
                     cur = k[(hits - 1) & 3] as u32;
                     continue;
                 }
@@ -533,13 +537,15 @@ impl SceneBvh {
             }
             // Pop the next entry that starts before the closest hit so far.
             loop {
-                let Some(key) = stack.pop() else {
+                if sp == 0 {
                     return (best != usize::MAX).then(|| Hit {
                         t: best_t,
                         triangle: self.slot_ref[best],
                         bary: Vec3::new(1.0 - best_uv.0 - best_uv.1, best_uv.0, best_uv.1),
                     });
-                };
+                }
+                sp -= 1;
+                let key = stack[sp & WRAP];
                 if f32::from_bits((key >> 32) as u32) <= best_t {
                     cur = key as u32;
                     break;
@@ -650,9 +656,9 @@ impl SceneBvh {
     fn for_each_pack_hit_with(&self, r: &RayPre, t_min: f32, t_max: f32, mut f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool) {
         // The nodes still to visit are `stack[..sp]`: a fixed array indexed modulo its
         // power-of-two length, so that no bounds or capacity check sits in the loop (a `Vec`'s
-        // push and pop were measurably slower). It cannot fill: see `ANY_STACK_LEN`.
-        let mut stack = [0u32; ANY_STACK_LEN];
-        const WRAP: usize = ANY_STACK_LEN - 1;
+        // push and pop were measurably slower). It cannot fill: see `STACK_LEN`.
+        let mut stack = [0u32; STACK_LEN];
+        const WRAP: usize = STACK_LEN - 1;
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
@@ -663,7 +669,7 @@ impl SceneBvh {
                     cur = n.child[mask.trailing_zeros() as usize & 3];
                     mask &= mask - 1;
                     while mask != 0 {
-                        debug_assert!(sp < ANY_STACK_LEN, "any-hit stack overflow");
+                        debug_assert!(sp < STACK_LEN, "any-hit stack overflow");
                         stack[sp & WRAP] = n.child[mask.trailing_zeros() as usize & 3];
                         sp += 1;
                         mask &= mask - 1;
@@ -694,15 +700,15 @@ impl SceneBvh {
     }
 }
 
-/// Length of the any-hit traversal stack (a power of two). A 4-wide node stacks at most three
+/// Length of the traversal stacks (a power of two). A 4-wide node stacks at most three
 /// children, and a path is at most `MAX_DEPTH` (56) nodes deep plus the ≤ 8 levels
 /// `Packer::leaf` adds above an oversized leaf, so at most 192 entries are ever stacked.
-const ANY_STACK_LEN: usize = 256;
+const STACK_LEN: usize = 256;
 
 thread_local! {
     /// Per-thread closest-hit traversal stack, reused from ray to ray (its 64-bit entries
     /// would make a large array to zero for every ray).
-    static HIT_STACK: std::cell::RefCell<Vec<u64>> = const { std::cell::RefCell::new(Vec::new()) };
+    static HIT_STACK: std::cell::RefCell<[u64; STACK_LEN]> = const { std::cell::RefCell::new([0; STACK_LEN]) };
 }
 
 /// Möller–Trumbore on four triangles: `(t, u, v, mask of lanes hit with t_min < t < t_max)`;
