@@ -14,7 +14,8 @@
 //! moments of a shared machine:
 //! - shadow rays: ours `any_hit_attenuation_cached` (the trace stage's path) and without the
 //!   cache, Embree `rtcOccluded1`;
-//! - reflection rays: ours `closest_hit`, Embree `rtcIntersect1`.
+//! - reflection rays and diffuse-bounce rays (cosine-weighted about the normal): ours
+//!   `closest_hit`, Embree `rtcIntersect1`.
 //!
 //! Rays go out in chunks of 256 on rayon's pool (2 threads here), for both. Each line gives the
 //! best of `TRACE_PASSES` (default 5) wall-clock passes, and the ratio ours / Embree. The answers
@@ -284,23 +285,22 @@ fn main() {
             blocked.iter().filter(|p| p.0).count(),
             blocked.iter().filter(|p| p.1).count()
         );
-        let hits: Vec<(Option<f32>, Option<f32>)> = r
-            .reflection
-            .par_iter()
-            .map(|&(o, d)| (bvh.closest_hit(o, d, 0.0, f32::INFINITY).map(|h| h.t), embree.closest_hit(o, d)))
-            .collect();
-        let differ = hits
-            .iter()
-            .filter(|(a, b)| match (a, b) {
-                (Some(a), Some(b)) => (a - b).abs() > 1e-3 * a.abs().max(b.abs()),
-                (a, b) => a.is_some() != b.is_some(),
-            })
-            .count();
-        println!(
-            "{name:>10} reflection rays: {} hit by ours, {} by Embree, {differ} differ",
-            hits.iter().filter(|p| p.0.is_some()).count(),
-            hits.iter().filter(|p| p.1.is_some()).count()
-        );
+        for (kind, rays) in [("reflection", &r.reflection), ("diffuse", &r.diffuse)] {
+            let hits: Vec<(Option<f32>, Option<f32>)> =
+                rays.par_iter().map(|&(o, d)| (bvh.closest_hit(o, d, 0.0, f32::INFINITY).map(|h| h.t), embree.closest_hit(o, d))).collect();
+            let differ = hits
+                .iter()
+                .filter(|(a, b)| match (a, b) {
+                    (Some(a), Some(b)) => (a - b).abs() > 1e-3 * a.abs().max(b.abs()),
+                    (a, b) => a.is_some() != b.is_some(),
+                })
+                .count();
+            println!(
+                "{name:>10} {kind} rays: {} hit by ours, {} by Embree, {differ} differ",
+                hits.iter().filter(|p| p.0.is_some()).count(),
+                hits.iter().filter(|p| p.1.is_some()).count()
+            );
+        }
 
         let chunks = |f: &(dyn Fn(Vec3, Vec3, f32) -> f32 + Sync)| -> f32 {
             r.shadow.par_chunks(256).with_max_len(1).map(|c| c.iter().map(|&(o, d, t)| f(o, d, t)).sum::<f32>()).sum()
@@ -326,24 +326,24 @@ fn main() {
         };
         line(name, "shadow rays, no cache", r.shadow.len(), "rays", race(passes, shadow_plain, shadow_embree));
 
-        let reflect_ours = || {
-            std::hint::black_box(
-                r.reflection
-                    .par_chunks(256)
-                    .with_max_len(1)
-                    .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
-                    .sum::<f32>(),
-            );
-        };
-        let reflect_embree = || {
-            std::hint::black_box(
-                r.reflection
-                    .par_chunks(256)
-                    .with_max_len(1)
-                    .map(|c| c.iter().filter_map(|&(o, d)| embree.closest_hit(o, d)).sum::<f32>())
-                    .sum::<f32>(),
-            );
-        };
-        line(name, "reflection rays", r.reflection.len(), "rays", race(passes, reflect_ours, reflect_embree));
+        for (kind, rays) in [("reflection rays", &r.reflection), ("diffuse-bounce rays", &r.diffuse)] {
+            let ours = || {
+                std::hint::black_box(
+                    rays.par_chunks(256)
+                        .with_max_len(1)
+                        .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
+                        .sum::<f32>(),
+                );
+            };
+            let theirs = || {
+                std::hint::black_box(
+                    rays.par_chunks(256)
+                        .with_max_len(1)
+                        .map(|c| c.iter().filter_map(|&(o, d)| embree.closest_hit(o, d)).sum::<f32>())
+                        .sum::<f32>(),
+                );
+            };
+            line(name, kind, rays.len(), "rays", race(passes, ours, theirs));
+        }
     }
 }

@@ -108,10 +108,29 @@ pub fn sponza() -> Option<Scene> {
     Some(scene_of(meshes, materials, camera, textures))
 }
 
-/// Shadow rays (origin, unit dir, distance) towards a light and reflection rays from the hits.
+/// Shadow rays (origin, unit dir, distance) towards a light, reflection rays and diffuse-bounce
+/// rays (cosine-weighted about the normal, the most incoherent kind) from the hits.
 pub struct Rays {
     pub shadow: Vec<(Vec3, Vec3, f32)>,
     pub reflection: Vec<(Vec3, Vec3)>,
+    pub diffuse: Vec<(Vec3, Vec3)>,
+}
+
+/// Two numbers in [0, 1) from an integer (a fixed hash, so every run traces the same rays).
+fn hash2(i: u32) -> (f32, f32) {
+    let mut x = u64::from(i).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xD1B5_4A32_D192_ED03;
+    x ^= x >> 29;
+    x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x ^= x >> 32;
+    ((x >> 40) as f32 / (1u64 << 24) as f32, ((x >> 16) & 0xFF_FFFF) as f32 / (1u64 << 24) as f32)
+}
+
+/// A cosine-weighted direction about the unit normal `n`.
+fn cosine_direction(n: Vec3, (u1, u2): (f32, f32)) -> Vec3 {
+    let (t, b) = n.any_orthonormal_pair();
+    let r = u1.sqrt();
+    let phi = std::f32::consts::TAU * u2;
+    (t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt()).normalize()
 }
 
 pub fn rays(prepared: &PreparedScene, bvh: &SceneBvh, light: Vec3) -> Rays {
@@ -120,6 +139,7 @@ pub fn rays(prepared: &PreparedScene, bvh: &SceneBvh, light: Vec3) -> Rays {
     let bias = 1e-3;
     let mut shadow = Vec::new();
     let mut reflection = Vec::new();
+    let mut diffuse = Vec::new();
     for i in 0..g.len() {
         if g.mask[i] == 0.0 {
             continue;
@@ -131,8 +151,9 @@ pub fn rays(prepared: &PreparedScene, bvh: &SceneBvh, light: Vec3) -> Rays {
         let to = light - o;
         shadow.push((o, to.normalize(), to.length()));
         reflection.push((o, reflect(i_dir, n)));
+        diffuse.push((o, cosine_direction(n, hash2(i as u32))));
     }
-    Rays { shadow, reflection }
+    Rays { shadow, reflection, diffuse }
 }
 
 /// The benchmark scenes with their light positions.
