@@ -23,7 +23,8 @@
 //! trace the same work.
 //!
 //! `EMBREE_CONFIG` is passed to `rtcNewDevice` (default `threads=2`): `verbose=1` prints the
-//! ISA Embree picked, `isa=sse2` (or `sse4.2`, `avx`, `avx2`) forces one.
+//! ISA Embree picked, `isa=sse2` (or `sse4.2`, `avx`, `avx2`) forces one. `EMBREE_QUALITY=2`
+//! builds with `RTC_BUILD_QUALITY_HIGH` (spatial splits) instead of medium (1).
 
 mod trace_scenes;
 
@@ -169,7 +170,8 @@ impl<'d> Scene<'d> {
         // attached and released after (the scene keeps its own reference).
         unsafe {
             let scene = rtcNewScene(device.0);
-            rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
+            let quality = std::env::var("EMBREE_QUALITY").ok().and_then(|q| q.parse().ok()).unwrap_or(RTC_BUILD_QUALITY_MEDIUM);
+            rtcSetSceneBuildQuality(scene, quality);
             for mesh in prepared.meshes.iter().filter(|m| !m.indices.is_empty()) {
                 let geometry = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_TRIANGLE);
                 let v = rtcSetNewGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, mesh.positions.len())
