@@ -395,10 +395,13 @@ impl SceneBvh {
         drop(root);
 
         let Packer { packs: descs, leaves, .. } = packer;
-        let packs: Vec<Tri4> = descs
+        // Per pack, in one parallel pass: the triangle data, and per lane the triangle and its
+        // shadow transparency.
+        let (packs, lanes): (Vec<Tri4>, Vec<[(TriangleRef, f32); 4]>) = descs
             .par_iter()
             .map(|&(first, n)| {
                 let mut p = Tri4::EMPTY;
+                let mut lanes = [(NO_TRI, 1.0f32); 4];
                 for (lane, &tri) in order[first as usize..(first + n) as usize].iter().enumerate() {
                     let [a, b, c] = corners[tri as usize];
                     let (e1, e2) = (b - a, c - a);
@@ -407,37 +410,18 @@ impl SceneBvh {
                         p.e1[axis][lane] = e1[axis];
                         p.e2[axis][lane] = e2[axis];
                     }
+                    let t = prepared.triangles[tri as usize];
+                    lanes[lane] = (t, material_shadow.get(prepared.meshes[t.mesh as usize].material).copied().unwrap_or(1.0));
                 }
-                p
+                (p, lanes)
             })
-            .collect();
-        let slot_ref: Vec<TriangleRef> = descs
-            .par_iter()
-            .flat_map_iter(|&(first, n)| {
-                let order = &order;
-                (0..4).map(move |lane| if lane < n { prepared.triangles[order[(first + lane) as usize] as usize] } else { NO_TRI })
-            })
-            .collect();
-        let slot_shadow: Vec<f32> = slot_ref
-            .par_iter()
-            .map(
-                |t| if *t == NO_TRI { 1.0 } else { material_shadow.get(prepared.meshes[t.mesh as usize].material).copied().unwrap_or(1.0) },
-            )
-            .collect();
-        let pack_shadow = slot_shadow
-            .par_chunks_exact(4)
-            .map(|s| {
-                let mut bits = 0u8;
-                for (lane, &tr) in s.iter().enumerate() {
-                    if tr != 1.0 {
-                        bits |= 1 << lane;
-                    }
-                    if tr == 0.0 {
-                        bits |= 1 << (lane + 4);
-                    }
-                }
-                bits
-            })
+            .unzip();
+        let slot_ref: Vec<TriangleRef> = lanes.iter().flat_map(|l| l.map(|(t, _)| t)).collect();
+        let slot_shadow: Vec<f32> = lanes.iter().flat_map(|l| l.map(|(_, s)| s)).collect();
+        // Bits 0–3: lanes that can block light; bits 4–7: lanes that block it fully.
+        let pack_shadow: Vec<u8> = lanes
+            .iter()
+            .map(|l| (0..4).fold(0u8, |bits, k| bits | u8::from(l[k].1 != 1.0) << k | u8::from(l[k].1 == 0.0) << (k + 4)))
             .collect();
         SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles: order.len(), leaves }
     }
