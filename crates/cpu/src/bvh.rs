@@ -139,7 +139,8 @@ impl Tri4 {
 }
 
 /// The last opaque shadow blocker of one light, for
-/// [`SceneBvh::any_hit_attenuation_cached`]. Starts empty.
+/// [`SceneBvh::any_hit_attenuation_cached`]. Starts empty, and is emptied by a ray that no
+/// opaque triangle blocks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ShadowCache {
     /// Leaf reference (as in [`Node4::child`]) of the last opaque blocker; [`EMPTY_SLOT`]
@@ -606,6 +607,11 @@ impl SceneBvh {
             }
             true
         });
+        if att > 0.0 {
+            // No opaque blocker: the next ray towards this light most likely passes too, so
+            // testing this blocker first would only cost time.
+            cache.leaf = EMPTY_SLOT;
+        }
         att.max(0.0)
     }
 
