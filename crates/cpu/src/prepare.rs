@@ -225,11 +225,14 @@ impl TriangleSurface<'_> {
         let d = sample(mat.diffuse_map);
         let s = sample(mat.specular_map);
         let o = sample(mat.optical_map);
+        // Loaders give the ambient colour the diffuse map when a material names no ambient map
+        // (OBJ without `map_Ka`, glTF): the same sample, taken once.
+        let a = if mat.ambient_map == mat.diffuse_map { d } else { sample(mat.ambient_map) };
         Surface {
             position,
             normal,
             emission: mat.emission * sample(mat.emission_map).truncate(),
-            ambient: mat.ambient * sample(mat.ambient_map).truncate(),
+            ambient: mat.ambient * a.truncate(),
             diffuse: mat.diffuse * d.truncate() * color,
             // Opacity: material × diffuse-map alpha × optical-map B (Table 1).
             opacity: (mat.opacity * d.w * o.z).clamp(0.0, 1.0),
@@ -254,7 +257,8 @@ pub fn sample_texture(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
     let lod = if texels <= 1.0 { 0.0 } else { texels.log2() };
     let max = last as f32;
     let lod = if lod.is_finite() { lod.clamp(0.0, max) } else { 0.0 };
-    let l0 = floor(lod);
+    // lod ≥ 0 (or −0): its floor is its truncation.
+    let l0 = lod as u32 as f32;
     let f = lod - l0;
     if !uv.x.is_finite() || !uv.y.is_finite() {
         let a = bilinear(t, uv, l0 as usize);
@@ -262,8 +266,9 @@ pub fn sample_texture(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
     }
     // The UV's wrapped fraction is the same for both levels: computed once.
     let frac = Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y));
-    let a = bilinear_frac(t, uv, frac, l0 as usize);
-    if f <= 1e-4 { a } else { a.lerp(bilinear_frac(t, uv, frac, l0 as usize + 1), f) }
+    let decode = Decode::of(t);
+    let a = bilinear_frac(t, uv, frac, l0 as usize, decode);
+    if f <= 1e-4 { a } else { a.lerp(bilinear_frac(t, uv, frac, l0 as usize + 1, decode), f) }
 }
 
 /// [`sample_texture`], never inlined (keeps [`TriangleSurface::at`]'s map lookups small).
@@ -306,23 +311,51 @@ fn bilinear(t: &Texture, uv: Vec2, level: usize) -> Vec4 {
     if !uv.x.is_finite() || !uv.y.is_finite() {
         return t.texel(level, 0, 0);
     }
-    bilinear_frac(t, uv, Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y)), level)
+    bilinear_frac(t, uv, Vec2::new(uv.x - floor(uv.x), uv.y - floor(uv.y)), level, Decode::of(t))
+}
+
+/// How a texture's bytes become values: its colour space and the decode tables, looked up once
+/// per sample rather than per texel.
+#[derive(Clone, Copy)]
+struct Decode {
+    srgb: bool,
+    tables: &'static ([f32; 256], [f32; 256]),
+}
+
+impl Decode {
+    #[inline]
+    fn of(t: &Texture) -> Self {
+        Self { srgb: t.color_space == ColorSpace::Srgb, tables: decode_tables() }
+    }
+
+    #[inline(always)]
+    fn texel(self, p: [u8; 4]) -> Vec4 {
+        let (lut, unorm) = self.tables;
+        let a = unorm[p[3] as usize];
+        if self.srgb {
+            Vec4::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize], a)
+        } else {
+            Vec4::new(unorm[p[0] as usize], unorm[p[1] as usize], unorm[p[2] as usize], a)
+        }
+    }
 }
 
 /// [`bilinear`] for a finite `uv` whose wrapped fraction `frac` (`uv − floor(uv)`) is given.
 #[inline]
-fn bilinear_frac(t: &Texture, uv: Vec2, frac: Vec2, level: usize) -> Vec4 {
+fn bilinear_frac(t: &Texture, uv: Vec2, frac: Vec2, level: usize, decode: Decode) -> Vec4 {
     let level = level.min(t.levels.len() - 1);
     let l = &t.levels[level];
     let x = frac.x * l.width as f32 - 0.5;
     let y = frac.y * l.height as f32 - 0.5;
-    let (x0, y0) = (floor(x), floor(y));
-    let (fx, fy) = (x - x0, y - y0);
-    // With a finite UV the fraction is in [0, 1], so x0 ∈ [−1, width − 1] (y0 likewise): the
-    // texture's repeat wrap reduces to these two cases (the `min` only guards the impossible).
-    let wrap0 = |i: i32, n: u32| if i < 0 { n - 1 } else { (i as u32).min(n - 1) };
-    let wrap1 = |i: i32, n: u32| if i + 1 >= n as i32 { 0 } else { (i + 1).max(0) as u32 };
-    let (xi, yi) = (x0 as i32, y0 as i32);
+    // With a finite UV the fraction is in [0, 1], so x ∈ [−0.5, width − 0.5] (y likewise): its
+    // floor is its truncation, one less below 0 (x is never −0 here). The same integers as
+    // `floor`, so the same weights.
+    let (xi, yi) = (x as i32 - i32::from(x < 0.0), y as i32 - i32::from(y < 0.0));
+    let (fx, fy) = (x - xi as f32, y - yi as f32);
+    // x0 ∈ [−1, width − 1]: the texture's repeat wrap reduces to these two cases (a texel
+    // outside the level after all falls back to the reference sampler below).
+    let wrap0 = |i: i32, n: u32| if i < 0 { n - 1 } else { i as u32 };
+    let wrap1 = |i: i32, n: u32| if i + 1 >= n as i32 { 0 } else { (i + 1) as u32 };
     let (ix0, iy0) = (wrap0(xi, l.width), wrap0(yi, l.height));
     let (ix1, iy1) = (wrap1(xi, l.width), wrap1(yi, l.height));
     let (r0, r1) = (iy0 as usize * l.width as usize, iy1 as usize * l.width as usize);
@@ -334,18 +367,8 @@ fn bilinear_frac(t: &Texture, uv: Vec2, frac: Vec2, level: usize) -> Vec4 {
     ) else {
         return t.sample_bilinear(uv, level);
     };
-    let srgb = t.color_space == ColorSpace::Srgb;
-    let (lut, unorm) = decode_tables();
-    let decode = |p: [u8; 4]| -> Vec4 {
-        let a = unorm[p[3] as usize];
-        if srgb {
-            Vec4::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize], a)
-        } else {
-            Vec4::new(unorm[p[0] as usize], unorm[p[1] as usize], unorm[p[2] as usize], a)
-        }
-    };
-    let a = decode(t00).lerp(decode(t10), fx);
-    let b = decode(t01).lerp(decode(t11), fx);
+    let a = decode.texel(t00).lerp(decode.texel(t10), fx);
+    let b = decode.texel(t01).lerp(decode.texel(t11), fx);
     a.lerp(b, fy)
 }
 
