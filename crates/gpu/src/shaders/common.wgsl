@@ -293,7 +293,12 @@ fn evaluate_surface(p: SurfacePoint) -> Surface {
     let o = sample_map(mat.maps1.y, uv, footprint);
     s.normal = normal;
     s.emission = mat.emission.xyz * sample_map(mat.maps0.x, uv, footprint).xyz;
-    s.ambient = mat.ambient.xyz * sample_map(mat.maps0.y, uv, footprint).xyz;
+    // Loaders give ambient the diffuse map when no ambient map is named: one sample serves both.
+    var a = d;
+    if mat.maps0.y != mat.maps0.z {
+        a = sample_map(mat.maps0.y, uv, footprint);
+    }
+    s.ambient = mat.ambient.xyz * a.xyz;
     s.diffuse = mat.diffuse.xyz * d.xyz * color;
     s.opacity = clamp(mat.diffuse.w * d.w * o.z, 0.0, 1.0);
     s.specular = mat.specular.xyz * sp.xyz;
