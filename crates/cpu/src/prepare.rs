@@ -341,7 +341,7 @@ impl Decode {
 }
 
 /// [`bilinear`] for a finite `uv` whose wrapped fraction `frac` (`uv − floor(uv)`) is given.
-#[inline]
+#[inline(always)]
 fn bilinear_frac(t: &Texture, uv: Vec2, frac: Vec2, level: usize, decode: Decode) -> Vec4 {
     let level = level.min(t.levels.len() - 1);
     let l = &t.levels[level];
