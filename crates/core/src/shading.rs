@@ -1,7 +1,7 @@
 //! Shading shared by every stage and backend: Blinn–Phong for the three light kinds (paper
 //! listing 5), the skybox, and the reflection/refraction directions (listing 8a/8c).
 
-use glam::{Vec2, Vec3};
+use glam::{Vec2, Vec3, Vec4};
 use hybrid_scene::texture::Texture;
 use hybrid_scene::{DirectionalLight, Environment, Lights, PointLight, Skybox, SpotLight, specular_exponent};
 
@@ -231,6 +231,138 @@ impl FrameLights {
         }
         c
     }
+
+    /// [`Self::local_lighting`] of four surfaces at once (SIMD lanes = surfaces), bit for bit:
+    /// each lane does that function's operations in the same order (the same sums, the same
+    /// square roots and divisions, `+0` added for a light that contributes nothing), and the
+    /// specular power is the same `powf` call per lane. Deferred lighting shades the G-buffer's
+    /// pixels four at a time with it.
+    pub fn local_lighting4(&self, s: &[Surface; 4], view: [Vec3; 4]) -> [Vec3; 4] {
+        let lanes = |f: &dyn Fn(&Surface) -> Vec3| -> V3 { soa(s.map(|s| f(&s))) };
+        let (emission, ambient) = (lanes(&|s| s.emission), lanes(&|s| s.ambient));
+        let env = splat3(self.env_ambient);
+        let mut c: V3 = [0, 1, 2].map(|k| emission[k] + env[k] * ambient[k]);
+        if self.lights.is_empty() {
+            return aos(c);
+        }
+        let (position, normal, diffuse, specular) =
+            (lanes(&|s| s.position), lanes(&|s| s.normal), lanes(&|s| s.diffuse), lanes(&|s| s.specular));
+        let view = soa(view);
+        // `facing`: the normal flipped where n · view < 0.
+        let flip = dot3(normal, view).cmplt(Vec4::ZERO);
+        let n = normal.map(|v| Vec4::select(flip, -v, v));
+        let exponent = s.map(|s| specular_exponent(s.shininess));
+        let has_specular = s.map(|s| s.specular != Vec3::ZERO);
+        let any_specular = has_specular.contains(&true);
+        for light in &self.lights {
+            let (l, radiance) = light.incident4(position);
+            let n_dot_l = dot3(n, l);
+            // Lit unless the radiance is zero or n · l ≤ 0 (NaN is lit, as in the scalar test).
+            let dark =
+                (radiance[0].cmpeq(Vec4::ZERO) & radiance[1].cmpeq(Vec4::ZERO) & radiance[2].cmpeq(Vec4::ZERO)) | n_dot_l.cmple(Vec4::ZERO);
+            let mut spec = [Vec4::ZERO; 3];
+            if any_specular {
+                let lit = (!dark).bitmask();
+                // h = (l + view).normalize_or_zero(), then n · h.
+                let h = normalize_or_zero3([0, 1, 2].map(|k| l[k] + view[k]));
+                let n_dot_h = dot3(n, h).to_array();
+                let mut power = [0.0f32; 4];
+                for lane in 0..4 {
+                    if has_specular[lane] && lit >> lane & 1 != 0 {
+                        power[lane] = n_dot_h[lane].max(0.0).powf(exponent[lane]);
+                    }
+                }
+                let power = Vec4::from_array(power);
+                // Lanes without specular colour add +0, as the scalar path's `Vec3::ZERO` does
+                // (not `specular · 0`, which is −0 for a −0 component).
+                let with = glam::BVec4A::new(has_specular[0], has_specular[1], has_specular[2], has_specular[3]);
+                spec = specular.map(|v| Vec4::select(with, v * power, Vec4::ZERO));
+            }
+            for k in 0..3 {
+                let term = (diffuse[k] * n_dot_l + spec[k]) * radiance[k];
+                c[k] += Vec4::select(dark, Vec4::ZERO, term);
+            }
+        }
+        aos(c)
+    }
+}
+
+/// Three components of four lanes (structure of arrays).
+type V3 = [Vec4; 3];
+
+fn soa(v: [Vec3; 4]) -> V3 {
+    [0, 1, 2].map(|k| Vec4::new(v[0][k], v[1][k], v[2][k], v[3][k]))
+}
+
+fn aos(v: V3) -> [Vec3; 4] {
+    let [x, y, z] = v.map(|a| a.to_array());
+    [0, 1, 2, 3].map(|i| Vec3::new(x[i], y[i], z[i]))
+}
+
+fn splat3(v: Vec3) -> V3 {
+    [Vec4::splat(v.x), Vec4::splat(v.y), Vec4::splat(v.z)]
+}
+
+/// `Vec3::dot` lane by lane: `(x·x′ + y·y′) + z·z′`.
+#[inline]
+fn dot3(a: V3, b: V3) -> Vec4 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// `Vec3::normalize_or(fallback)` lane by lane: `v · (1 / √(v · v))` where that reciprocal is
+/// finite and positive.
+#[inline]
+fn normalize_or3(v: V3, fallback: V3) -> V3 {
+    let rcp = Vec4::ONE / dot3(v, v).sqrt();
+    let ok = rcp.is_finite_mask() & rcp.cmpgt(Vec4::ZERO);
+    [0, 1, 2].map(|k| Vec4::select(ok, v[k] * rcp, fallback[k]))
+}
+
+#[inline]
+fn normalize_or_zero3(v: V3) -> V3 {
+    normalize_or3(v, [Vec4::ZERO; 3])
+}
+
+impl FrameLight {
+    /// [`FrameLight::incident`] at four points, lane by lane.
+    #[inline]
+    fn incident4(&self, p: V3) -> (V3, V3) {
+        match *self {
+            FrameLight::Directional { to_light, radiance } => (splat3(to_light), splat3(radiance)),
+            FrameLight::Point { position, power, attenuation } => {
+                let (dir, d) = to_position4(p, position);
+                let f = attenuation_factor4(attenuation, d);
+                (dir, splat3(power).map(|v| v * f))
+            }
+            FrameLight::Spot { position, direction, power, attenuation, cos_inner, cos_outer } => {
+                let (dir, d) = to_position4(p, position);
+                let neg = dir.map(|v| -v);
+                let cos = dot3(neg, splat3(direction)).to_array();
+                let cone = Vec4::from_array(cos.map(|c| spot_cone(c, cos_inner, cos_outer)));
+                let f = attenuation_factor4(attenuation, d);
+                (dir, splat3(power).map(|v| v * f * cone))
+            }
+        }
+    }
+}
+
+/// `to_position` lane by lane: the unit direction `(light − p) / |light − p|` and the distance,
+/// or (+Y, 0) where the distance is not > 0.
+#[inline]
+fn to_position4(p: V3, light: Vec3) -> (V3, Vec4) {
+    let d = [0, 1, 2].map(|k| Vec4::splat(light[k]) - p[k]);
+    let len = dot3(d, d).sqrt();
+    let ok = len.cmpgt(Vec4::ZERO);
+    let y = [Vec4::ZERO, Vec4::ONE, Vec4::ZERO];
+    ([0, 1, 2].map(|k| Vec4::select(ok, d[k] / len, y[k])), Vec4::select(ok, len, Vec4::ZERO))
+}
+
+/// `Attenuation::factor` lane by lane: `1 / max(c + l·d + q·d·d, 1e-12)` (a NaN sum gives
+/// 1e-12, as `f32::max` does).
+#[inline]
+fn attenuation_factor4(a: hybrid_scene::Attenuation, d: Vec4) -> Vec4 {
+    let sum = Vec4::splat(a.constant) + Vec4::splat(a.linear) * d + Vec4::splat(a.quadratic) * d * d;
+    Vec4::ONE / sum.max(Vec4::splat(1e-12))
 }
 
 /// Mirror reflection of incident direction `i` about normal `n` (GLSL `reflect`).
@@ -404,6 +536,100 @@ mod tests {
         let none = FrameLights::new(&Lights::default(), &env);
         let s = surface();
         assert_eq!(bits(none.local_lighting(&s, Vec3::Y)), bits(local_lighting(&s, Vec3::Y, &Lights::default(), &env)));
+    }
+
+    #[test]
+    fn four_lane_lighting_matches_local_lighting_bit_for_bit() {
+        let att = Attenuation { constant: 1.0, linear: 0.1, quadratic: 0.05 };
+        let point = |position: Vec3, color: Vec3| PointLight { position, color, intensity: 7.0, attenuation: att, casts_shadows: true };
+        let all = Lights {
+            directional: vec![
+                DirectionalLight {
+                    direction: Vec3::new(-0.3, -1.0, -0.5).normalize(),
+                    color: Vec3::ONE,
+                    intensity: 1.2,
+                    casts_shadows: true,
+                },
+                DirectionalLight { direction: Vec3::Y, color: Vec3::ZERO, intensity: 1.0, casts_shadows: false },
+            ],
+            // A light at a shaded point below (distance 0: the +Y fallback), a black one.
+            point: vec![
+                point(Vec3::new(0.5, 3.0, 1.0), Vec3::new(1.0, 0.8, 0.6)),
+                point(Vec3::ZERO, Vec3::ONE),
+                point(Vec3::X, Vec3::ZERO),
+            ],
+            spot: vec![SpotLight {
+                position: Vec3::new(-1.0, 2.0, 0.0),
+                direction: Vec3::new(0.3, -1.0, 0.0).normalize(),
+                color: Vec3::ONE,
+                intensity: 5.0,
+                attenuation: att,
+                inner_angle: 0.3,
+                outer_angle: 0.6,
+                casts_shadows: true,
+            }],
+        };
+        let env = Environment { ambient: Vec3::new(0.1, -0.0, 0.2), ..Default::default() };
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut r = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        for (name, lights) in [("all kinds", all.clone()), ("none", Lights::default())] {
+            let fast = FrameLights::new(&lights, &env);
+            for k in 0..4000 {
+                let mut s = [Surface {
+                    position: Vec3::ZERO,
+                    normal: Vec3::Y,
+                    emission: Vec3::ZERO,
+                    ambient: Vec3::ZERO,
+                    diffuse: Vec3::ZERO,
+                    opacity: 1.0,
+                    specular: Vec3::ZERO,
+                    shininess: 0.0,
+                    reflectivity: 0.0,
+                    ior: 1.0,
+                }; 4];
+                let mut view = [Vec3::Z; 4];
+                for (lane, (s, v)) in s.iter_mut().zip(&mut view).enumerate() {
+                    *s = Surface {
+                        position: if (k + lane) % 11 == 0 { Vec3::ZERO } else { Vec3::new(r(), r(), r()) * 2.0 },
+                        normal: match (k + lane) % 13 {
+                            0 => Vec3::ZERO,
+                            1 => -Vec3::Y,
+                            _ => Vec3::new(r(), r(), r()).normalize_or(Vec3::Y),
+                        },
+                        // y: −0 + (−0 · 0) stays −0 until a light adds +0 to it.
+                        emission: Vec3::new(r().abs() * 0.1, -0.0, 0.0),
+                        ambient: Vec3::new(r().abs(), 0.0, 0.0),
+                        diffuse: if (k + lane) % 7 == 0 { Vec3::new(-0.0, -0.0, 0.3) } else { Vec3::new(r(), r(), r()).abs() },
+                        opacity: 1.0,
+                        specular: match (k + lane) % 3 {
+                            0 => Vec3::ZERO,
+                            1 => Vec3::splat(-0.0),
+                            _ => Vec3::splat(r().abs()),
+                        },
+                        shininess: r().abs() * 1.2 - 0.1,
+                        reflectivity: 0.0,
+                        ior: 1.0,
+                    };
+                    // Unit views, and the degenerate -n and zero.
+                    *v = match (k + lane) % 17 {
+                        0 => Vec3::ZERO,
+                        1 => -s.normal,
+                        _ => Vec3::new(r(), r(), r()).normalize_or(Vec3::Z),
+                    };
+                }
+                let got = fast.local_lighting4(&s, view);
+                for lane in 0..4 {
+                    let want = fast.local_lighting(&s[lane], view[lane]);
+                    assert_eq!(bits(got[lane]), bits(want), "{name}, lane {lane}: {:?} {}", s[lane], view[lane]);
+                }
+            }
+        }
     }
 
     #[test]
