@@ -470,10 +470,10 @@ mod tests {
         assert!((c.x - 0.3 * h.y).abs() < 1e-6);
     }
 
-    #[test]
-    fn frame_lights_match_local_lighting_bit_for_bit() {
+    /// One light of each kind and a black directional one (attenuated point and spot lights).
+    fn every_kind_of_light() -> Lights {
         let att = Attenuation { constant: 1.0, linear: 0.1, quadratic: 0.05 };
-        let all = Lights {
+        Lights {
             directional: vec![
                 DirectionalLight {
                     direction: Vec3::new(-0.3, -1.0, -0.5).normalize(),
@@ -500,7 +500,12 @@ mod tests {
                 outer_angle: 0.6,
                 casts_shadows: true,
             }],
-        };
+        }
+    }
+
+    #[test]
+    fn frame_lights_match_local_lighting_bit_for_bit() {
+        let all = every_kind_of_light();
         let env = Environment { ambient: Vec3::splat(0.1), ..Default::default() };
         let fast = FrameLights::new(&all, &env);
         let mut seed = 0x2545_f491_4f6c_dd1du64;
@@ -540,35 +545,10 @@ mod tests {
 
     #[test]
     fn four_lane_lighting_matches_local_lighting_bit_for_bit() {
-        let att = Attenuation { constant: 1.0, linear: 0.1, quadratic: 0.05 };
-        let point = |position: Vec3, color: Vec3| PointLight { position, color, intensity: 7.0, attenuation: att, casts_shadows: true };
-        let all = Lights {
-            directional: vec![
-                DirectionalLight {
-                    direction: Vec3::new(-0.3, -1.0, -0.5).normalize(),
-                    color: Vec3::ONE,
-                    intensity: 1.2,
-                    casts_shadows: true,
-                },
-                DirectionalLight { direction: Vec3::Y, color: Vec3::ZERO, intensity: 1.0, casts_shadows: false },
-            ],
-            // A light at a shaded point below (distance 0: the +Y fallback), a black one.
-            point: vec![
-                point(Vec3::new(0.5, 3.0, 1.0), Vec3::new(1.0, 0.8, 0.6)),
-                point(Vec3::ZERO, Vec3::ONE),
-                point(Vec3::X, Vec3::ZERO),
-            ],
-            spot: vec![SpotLight {
-                position: Vec3::new(-1.0, 2.0, 0.0),
-                direction: Vec3::new(0.3, -1.0, 0.0).normalize(),
-                color: Vec3::ONE,
-                intensity: 5.0,
-                attenuation: att,
-                inner_angle: 0.3,
-                outer_angle: 0.6,
-                casts_shadows: true,
-            }],
-        };
+        let mut all = every_kind_of_light();
+        // A light at a shaded point below (distance 0: the +Y fallback), a black one.
+        let point = |position: Vec3, color: Vec3| PointLight { position, color, ..all.point[0] };
+        all.point.extend([point(Vec3::ZERO, Vec3::ONE), point(Vec3::X, Vec3::ZERO)]);
         let env = Environment { ambient: Vec3::new(0.1, -0.0, 0.2), ..Default::default() };
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut r = || {

@@ -33,9 +33,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 use hybrid_cpu::PreparedScene;
-use hybrid_cpu::bvh::{SceneBvh, ShadowCache};
+use hybrid_cpu::bvh::SceneBvh;
 use rayon::prelude::*;
-use trace_scenes::{load_average, rays, scenes};
+use trace_scenes::{load_average, rays, scenes, trace_closest_hits, trace_shadow_rays};
 
 // --- Embree 3.13 C API (rtcore.h), the parts used here ---------------------------------------
 
@@ -308,34 +308,20 @@ fn main() {
             r.shadow.par_chunks(256).with_max_len(1).map(|c| c.iter().map(|&(o, d, t)| f(o, d, t)).sum::<f32>()).sum()
         };
         let shadow_cached = || {
-            std::hint::black_box(
-                r.shadow
-                    .par_chunks(256)
-                    .with_max_len(1)
-                    .map(|c| {
-                        let mut cache = ShadowCache::default();
-                        c.iter().map(|&(o, d, t)| bvh.any_hit_attenuation_cached(&prepared, o, d, t, &mut cache)).sum::<f32>()
-                    })
-                    .sum::<f32>(),
-            );
+            std::hint::black_box(trace_shadow_rays(&prepared, &bvh, &r.shadow, true));
         };
         let shadow_embree = || {
             std::hint::black_box(chunks(&|o, d, t| if embree.occluded(o, d, t) { 0.0 } else { 1.0 }));
         };
         line(name, "shadow rays, cache", r.shadow.len(), "rays", race(passes, shadow_cached, shadow_embree));
         let shadow_plain = || {
-            std::hint::black_box(chunks(&|o, d, t| bvh.any_hit_attenuation(&prepared, o, d, t)));
+            std::hint::black_box(trace_shadow_rays(&prepared, &bvh, &r.shadow, false));
         };
         line(name, "shadow rays, no cache", r.shadow.len(), "rays", race(passes, shadow_plain, shadow_embree));
 
         for (kind, rays) in [("reflection rays", &r.reflection), ("diffuse-bounce rays", &r.diffuse)] {
             let ours = || {
-                std::hint::black_box(
-                    rays.par_chunks(256)
-                        .with_max_len(1)
-                        .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
-                        .sum::<f32>(),
-                );
+                std::hint::black_box(trace_closest_hits(&bvh, rays));
             };
             let theirs = || {
                 std::hint::black_box(

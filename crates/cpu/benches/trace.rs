@@ -27,11 +27,11 @@ use glam::Vec3;
 use hybrid_core::GBuffer;
 use hybrid_core::shading::local_lighting;
 use hybrid_cpu::PreparedScene;
-use hybrid_cpu::bvh::{SceneBvh, ShadowCache};
+use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::trace::{rt_only_gbuffer, trace};
 use hybrid_scene::{Lights, PointLight, Scene};
 use rayon::prelude::*;
-use trace_scenes::{HEIGHT, WIDTH, measure, rays, report, scenes};
+use trace_scenes::{HEIGHT, WIDTH, measure, rays, report, scenes, trace_closest_hits, trace_shadow_rays};
 
 fn bench_scene(c: &mut Criterion, name: &str, scene: &Scene, light: Vec3) {
     let prepared = PreparedScene::new(scene);
@@ -43,25 +43,9 @@ fn bench_scene(c: &mut Criterion, name: &str, scene: &Scene, light: Vec3) {
     let bvh = SceneBvh::build(&prepared);
     let r = rays(&prepared, &bvh, light);
     group.throughput(Throughput::Elements(r.shadow.len() as u64));
-    group.bench_function("shadow_rays", |b| {
-        b.iter(|| {
-            r.shadow
-                .par_chunks(256)
-                .with_max_len(1)
-                .map(|c| c.iter().map(|&(o, d, t)| bvh.any_hit_attenuation(&prepared, o, d, t)).sum::<f32>())
-                .sum::<f32>()
-        })
-    });
+    group.bench_function("shadow_rays", |b| b.iter(|| trace_shadow_rays(&prepared, &bvh, &r.shadow, false)));
     group.throughput(Throughput::Elements(r.reflection.len() as u64));
-    group.bench_function("reflection_rays", |b| {
-        b.iter(|| {
-            r.reflection
-                .par_chunks(256)
-                .with_max_len(1)
-                .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
-                .sum::<f32>()
-        })
-    });
+    group.bench_function("reflection_rays", |b| b.iter(|| trace_closest_hits(&bvh, &r.reflection)));
     group.bench_function("primary_rays_gbuffer", |b| b.iter(|| rt_only_gbuffer(&prepared, &bvh, &scene.camera, WIDTH, HEIGHT)));
     group.finish();
 }
@@ -106,13 +90,7 @@ fn cpu_time_report() {
         report(name, &format!("bvh build {}k tris", tris / 1000), tris, "tris", measure(&one, || drop(SceneBvh::build(&prepared))));
         let bvh = SceneBvh::build(&prepared);
         let r = rays(&prepared, &bvh, light);
-        let shadow = || {
-            r.shadow
-                .par_chunks(256)
-                .with_max_len(1)
-                .map(|c| c.iter().map(|&(o, d, t)| bvh.any_hit_attenuation(&prepared, o, d, t)).sum::<f32>())
-                .sum::<f32>()
-        };
+        let shadow = || trace_shadow_rays(&prepared, &bvh, &r.shadow, false);
         report(
             name,
             "shadow rays",
@@ -122,16 +100,7 @@ fn cpu_time_report() {
                 std::hint::black_box(shadow());
             }),
         );
-        let shadow_cached = || {
-            r.shadow
-                .par_chunks(256)
-                .with_max_len(1)
-                .map(|c| {
-                    let mut cache = ShadowCache::default();
-                    c.iter().map(|&(o, d, t)| bvh.any_hit_attenuation_cached(&prepared, o, d, t, &mut cache)).sum::<f32>()
-                })
-                .sum::<f32>()
-        };
+        let shadow_cached = || trace_shadow_rays(&prepared, &bvh, &r.shadow, true);
         // Both give the same attenuation for every ray.
         assert_eq!(shadow().to_bits(), shadow_cached().to_bits(), "{name}: the shadow cache changed a result");
         report(
@@ -143,13 +112,7 @@ fn cpu_time_report() {
                 std::hint::black_box(shadow_cached());
             }),
         );
-        let reflection = || {
-            r.reflection
-                .par_chunks(256)
-                .with_max_len(1)
-                .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
-                .sum::<f32>()
-        };
+        let reflection = || trace_closest_hits(&bvh, &r.reflection);
         report(
             name,
             "reflection rays",

@@ -8,9 +8,10 @@ use std::path::Path;
 use glam::{Vec2, Vec3};
 use hybrid_core::shading::reflect;
 use hybrid_cpu::PreparedScene;
-use hybrid_cpu::bvh::SceneBvh;
+use hybrid_cpu::bvh::{SceneBvh, ShadowCache};
 use hybrid_cpu::trace::rt_only_gbuffer;
 use hybrid_scene::{Camera, Material, Mesh, Object, ObjectSource, Projection, Scene, Transform};
+use rayon::prelude::*;
 
 pub const SPONZA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets/sponza-dabrovic/sponza_dabrovic.obj");
 pub const WIDTH: u32 = 640;
@@ -211,4 +212,36 @@ pub fn report(name: &str, what: &str, items: usize, unit: &str, (cpu, wall): (f6
         m / wall,
         load_average()
     );
+}
+
+/// Rays per parallel work item, as the trace stage hands them out (one at a time: uneven costs).
+const CHUNK: usize = 256;
+
+/// Shadow rays `(origin, unit dir, distance)` traced in parallel chunks as the trace stage does
+/// (`cached`: with one shadow cache per chunk, the stage's path); returns the sum of their
+/// attenuations, so that no work can be optimised away.
+pub fn trace_shadow_rays(prepared: &PreparedScene, bvh: &SceneBvh, rays: &[(Vec3, Vec3, f32)], cached: bool) -> f32 {
+    rays.par_chunks(CHUNK)
+        .with_max_len(1)
+        .map(|c| {
+            let mut cache = ShadowCache::default();
+            c.iter()
+                .map(|&(o, d, t)| {
+                    if cached {
+                        bvh.any_hit_attenuation_cached(prepared, o, d, t, &mut cache)
+                    } else {
+                        bvh.any_hit_attenuation(prepared, o, d, t)
+                    }
+                })
+                .sum::<f32>()
+        })
+        .sum()
+}
+
+/// Closest hits of rays `(origin, dir)` in parallel chunks; returns the sum of the hit distances.
+pub fn trace_closest_hits(bvh: &SceneBvh, rays: &[(Vec3, Vec3)]) -> f32 {
+    rays.par_chunks(CHUNK)
+        .with_max_len(1)
+        .map(|c| c.iter().filter_map(|&(o, d)| bvh.closest_hit(o, d, 0.0, f32::INFINITY)).map(|h| h.t).sum::<f32>())
+        .sum()
 }
