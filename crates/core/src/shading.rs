@@ -470,6 +470,17 @@ mod tests {
         assert!((c.x - 0.3 * h.y).abs() < 1e-6);
     }
 
+    /// Uniform numbers in [−1, 1) from a xorshift generator (fixed seeds: every run tests the
+    /// same points).
+    fn uniform(mut seed: u64) -> impl FnMut() -> f32 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        }
+    }
+
     /// One light of each kind and a black directional one (attenuated point and spot lights).
     fn every_kind_of_light() -> Lights {
         let att = Attenuation { constant: 1.0, linear: 0.1, quadratic: 0.05 };
@@ -508,13 +519,7 @@ mod tests {
         let all = every_kind_of_light();
         let env = Environment { ambient: Vec3::splat(0.1), ..Default::default() };
         let fast = FrameLights::new(&all, &env);
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut r = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut r = uniform(0x2545_f491_4f6c_dd1d);
         let bits = |v: Vec3| v.to_array().map(f32::to_bits);
         for k in 0..5000 {
             let s = Surface {
@@ -550,59 +555,38 @@ mod tests {
         let point = |position: Vec3, color: Vec3| PointLight { position, color, ..all.point[0] };
         all.point.extend([point(Vec3::ZERO, Vec3::ONE), point(Vec3::X, Vec3::ZERO)]);
         let env = Environment { ambient: Vec3::new(0.1, -0.0, 0.2), ..Default::default() };
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut r = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut r = uniform(0x9e37_79b9_7f4a_7c15);
         let bits = |v: Vec3| v.to_array().map(f32::to_bits);
         for (name, lights) in [("all kinds", all.clone()), ("none", Lights::default())] {
             let fast = FrameLights::new(&lights, &env);
             for k in 0..4000 {
-                let mut s = [Surface {
-                    position: Vec3::ZERO,
-                    normal: Vec3::Y,
-                    emission: Vec3::ZERO,
-                    ambient: Vec3::ZERO,
-                    diffuse: Vec3::ZERO,
+                let s: [Surface; 4] = std::array::from_fn(|lane| Surface {
+                    position: if (k + lane) % 11 == 0 { Vec3::ZERO } else { Vec3::new(r(), r(), r()) * 2.0 },
+                    normal: match (k + lane) % 13 {
+                        0 => Vec3::ZERO,
+                        1 => -Vec3::Y,
+                        _ => Vec3::new(r(), r(), r()).normalize_or(Vec3::Y),
+                    },
+                    // y: −0 + (−0 · 0) stays −0 until a light adds +0 to it.
+                    emission: Vec3::new(r().abs() * 0.1, -0.0, 0.0),
+                    ambient: Vec3::new(r().abs(), 0.0, 0.0),
+                    diffuse: if (k + lane) % 7 == 0 { Vec3::new(-0.0, -0.0, 0.3) } else { Vec3::new(r(), r(), r()).abs() },
                     opacity: 1.0,
-                    specular: Vec3::ZERO,
-                    shininess: 0.0,
+                    specular: match (k + lane) % 3 {
+                        0 => Vec3::ZERO,
+                        1 => Vec3::splat(-0.0),
+                        _ => Vec3::splat(r().abs()),
+                    },
+                    shininess: r().abs() * 1.2 - 0.1,
                     reflectivity: 0.0,
                     ior: 1.0,
-                }; 4];
-                let mut view = [Vec3::Z; 4];
-                for (lane, (s, v)) in s.iter_mut().zip(&mut view).enumerate() {
-                    *s = Surface {
-                        position: if (k + lane) % 11 == 0 { Vec3::ZERO } else { Vec3::new(r(), r(), r()) * 2.0 },
-                        normal: match (k + lane) % 13 {
-                            0 => Vec3::ZERO,
-                            1 => -Vec3::Y,
-                            _ => Vec3::new(r(), r(), r()).normalize_or(Vec3::Y),
-                        },
-                        // y: −0 + (−0 · 0) stays −0 until a light adds +0 to it.
-                        emission: Vec3::new(r().abs() * 0.1, -0.0, 0.0),
-                        ambient: Vec3::new(r().abs(), 0.0, 0.0),
-                        diffuse: if (k + lane) % 7 == 0 { Vec3::new(-0.0, -0.0, 0.3) } else { Vec3::new(r(), r(), r()).abs() },
-                        opacity: 1.0,
-                        specular: match (k + lane) % 3 {
-                            0 => Vec3::ZERO,
-                            1 => Vec3::splat(-0.0),
-                            _ => Vec3::splat(r().abs()),
-                        },
-                        shininess: r().abs() * 1.2 - 0.1,
-                        reflectivity: 0.0,
-                        ior: 1.0,
-                    };
-                    // Unit views, and the degenerate -n and zero.
-                    *v = match (k + lane) % 17 {
-                        0 => Vec3::ZERO,
-                        1 => -s.normal,
-                        _ => Vec3::new(r(), r(), r()).normalize_or(Vec3::Z),
-                    };
-                }
+                });
+                // Unit views, and the degenerate −n and zero.
+                let view: [Vec3; 4] = std::array::from_fn(|lane| match (k + lane) % 17 {
+                    0 => Vec3::ZERO,
+                    1 => -s[lane].normal,
+                    _ => Vec3::new(r(), r(), r()).normalize_or(Vec3::Z),
+                });
                 let got = fast.local_lighting4(&s, view);
                 for lane in 0..4 {
                     let want = fast.local_lighting(&s[lane], view[lane]);
