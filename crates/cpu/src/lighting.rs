@@ -92,8 +92,9 @@ pub fn primary_ray(camera: &Camera, width: u32, height: u32, px: u32, py: u32) -
 const LIGHTING_ROWS: usize = 8;
 
 /// Listing 5 over the whole G-buffer: the P-buffer (linear RGB, row-major). Deterministic and
-/// parallel over rows. Per-light constants are computed once per frame ([`FrameLights`]), and
-/// only the targets lighting needs are read (same result as `local_lighting` per pixel).
+/// parallel over rows. Per-light constants are computed once per frame ([`FrameLights`]), only
+/// the targets lighting needs are read, and covered pixels are shaded four at a time
+/// ([`FrameLights::local_lighting4`]): the same result, bit for bit, as `local_lighting` per pixel.
 pub fn deferred_lighting(gbuffer: &GBuffer, scene: &Scene, camera: &Camera) -> Vec<Vec3> {
     let mut out = Vec::new();
     deferred_lighting_into(gbuffer, scene, camera, &mut out);

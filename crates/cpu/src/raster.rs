@@ -12,7 +12,8 @@
 //! 3. **Bands** (parallel): each band owns its rows of every target. It writes the RT layer's
 //!    depth first (so polygons must be nearer, depth test Greater), rasterises its bin in scene
 //!    triangle order with integer edge functions and the top-left rule into a local visibility
-//!    buffer (triangle id + depth), then shades only the winner of each pixel with
+//!    buffer (triangle id + depth; long rows walk only their exactly computed covered span, not
+//!    the whole bounding box), then shades only the winner of each pixel with
 //!    [`PreparedScene::surface_at`] (deferred: no cost for overdraw).
 //!
 //! Output is bit-identical for any number of threads: chunking and banding are fixed, each
