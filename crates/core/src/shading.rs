@@ -153,16 +153,24 @@ impl FrameLight {
     /// As [`Light::incident`], bit for bit.
     #[inline]
     fn incident(&self, p: Vec3) -> (Vec3, Vec3) {
+        let (dir, _, radiance) = self.incident_and_distance(p);
+        (dir, radiance)
+    }
+
+    /// [`Self::incident`] with the distance to the light ([`Light::direction_from`]'s: ∞ for a
+    /// directional light), all from one `to_position`.
+    #[inline]
+    fn incident_and_distance(&self, p: Vec3) -> (Vec3, f32, Vec3) {
         match *self {
-            FrameLight::Directional { to_light, radiance } => (to_light, radiance),
+            FrameLight::Directional { to_light, radiance } => (to_light, f32::INFINITY, radiance),
             FrameLight::Point { position, power, attenuation } => {
                 let (dir, d) = to_position(p, position);
-                (dir, power * attenuation.factor(d))
+                (dir, d, power * attenuation.factor(d))
             }
             FrameLight::Spot { position, direction, power, attenuation, cos_inner, cos_outer } => {
                 let (dir, d) = to_position(p, position);
                 let cone = spot_cone((-dir).dot(direction), cos_inner, cos_outer);
-                (dir, power * attenuation.factor(d) * cone)
+                (dir, d, power * attenuation.factor(d) * cone)
             }
         }
     }
@@ -175,10 +183,26 @@ impl FrameLights {
         self.lights[k].incident(p)
     }
 
+    /// Light `k` (in [`lights`] order) at `p`: `(direction, distance, radiance)`, where
+    /// direction and radiance are [`Light::incident`]'s and direction and distance
+    /// [`Light::direction_from`]'s, bit for bit (a shadow ray and its light's term from one
+    /// evaluation).
+    #[inline]
+    pub fn incident_and_distance(&self, k: usize, p: Vec3) -> (Vec3, f32, Vec3) {
+        self.lights[k].incident_and_distance(p)
+    }
+
     /// Light `k` (in [`lights`] order): [`Light::blinn_phong`], bit for bit.
     #[inline]
     pub fn blinn_phong(&self, k: usize, s: &Surface, view: Vec3) -> Vec3 {
         blinn_phong_from(self.lights[k].incident(s.position), s, view)
+    }
+
+    /// [`Self::blinn_phong`] for light arriving as `(direction, radiance)` already evaluated
+    /// (by [`Self::incident_and_distance`]) at `s.position`.
+    #[inline]
+    pub fn blinn_phong_incident(&self, (l, radiance): (Vec3, Vec3), s: &Surface, view: Vec3) -> Vec3 {
+        blinn_phong_from((l, radiance), s, view)
     }
 
     pub fn new(all: &Lights, env: &Environment) -> Self {
@@ -539,6 +563,9 @@ mod tests {
             for (i, light) in lights(&all).enumerate() {
                 let ((l0, r0), (l1, r1)) = (fast.incident(i, s.position), light.incident(s.position));
                 assert_eq!((bits(l0), bits(r0)), (bits(l1), bits(r1)), "light {i}: {s:?}");
+                let ((l2, d2, r2), (l3, d3)) = (fast.incident_and_distance(i, s.position), light.direction_from(s.position));
+                assert_eq!((bits(l2), bits(r2)), (bits(l1), bits(r1)), "light {i}: {s:?}");
+                assert_eq!((bits(l2), d2.to_bits()), (bits(l3), d3.to_bits()), "light {i}: {s:?}");
                 assert_eq!(bits(fast.blinn_phong(i, &s, view)), bits(light.blinn_phong(&s, view)), "light {i}: {s:?} {view}");
             }
         }

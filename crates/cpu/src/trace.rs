@@ -172,11 +172,10 @@ impl Tracer<'_, '_> {
             // The cheap half of Blinn–Phong first (no radiance, or the light behind the
             // surface: it contributes nothing, so no ray); the full term only where the ray
             // finds a blocker.
-            let (l, radiance) = self.frame_lights.incident(k, s.position);
-            if radiance == Vec3::ZERO || facing(s.normal, view).dot(l) <= 0.0 {
+            let (dir, dist, radiance) = self.frame_lights.incident_and_distance(k, s.position);
+            if radiance == Vec3::ZERO || facing(s.normal, view).dot(dir) <= 0.0 {
                 continue;
             }
-            let (dir, dist) = light.direction_from(s.position);
             rays.shadow += 1;
             let origin = self.offset(&s, dir);
             let mut att = self.bvh.any_hit_attenuation_cached(self.prepared, origin, dir, dist, cache);
@@ -184,7 +183,7 @@ impl Tracer<'_, '_> {
                 att = 0.0;
             }
             if att < 1.0 {
-                shadow -= self.frame_lights.blinn_phong(k, &s, view) * (1.0 - att);
+                shadow -= self.frame_lights.blinn_phong_incident((dir, radiance), &s, view) * (1.0 - att);
             }
         }
 
