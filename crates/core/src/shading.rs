@@ -183,6 +183,16 @@ impl FrameLights {
         self.lights[k].incident(p)
     }
 
+    /// Number of lights.
+    pub fn len(&self) -> usize {
+        self.lights.len()
+    }
+
+    /// Whether there are no lights.
+    pub fn is_empty(&self) -> bool {
+        self.lights.is_empty()
+    }
+
     /// Light `k` (in [`lights`] order) at `p`: `(direction, distance, radiance)`, where
     /// direction and radiance are [`Light::incident`]'s and direction and distance
     /// [`Light::direction_from`]'s, bit for bit (a shadow ray and its light's term from one
