@@ -620,7 +620,7 @@ fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mu
         // Same sum, in the same order, as z0 + dzdx·(x − x0) + dzdy·(y − y0).
         let zy = dzdy * (y - t.y0) as f32;
         let last = drow.len() - 1;
-        if last >= SPAN_MIN_PX {
+        if drow.len() >= SPAN_MIN_PX {
             // Long rows: only the covered span. Most of a large or thin triangle's box is
             // outside it (Sponza's: 85% of box pixels), and the span is exact (the pixels whose
             // three edge values are ≥ 0), so the same pixels are tested.
@@ -646,9 +646,9 @@ fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mu
     });
 }
 
-/// Rows of at least this many pixels (minus one) are walked over their covered span only;
-/// shorter ones test every pixel (cheaper than the span's divisions).
-const SPAN_MIN_PX: usize = 8;
+/// Rows of at least this many pixels are walked over their covered span only; shorter ones test
+/// every pixel (cheaper than the span's divisions).
+const SPAN_MIN_PX: usize = 9;
 
 /// The pixels `k ∈ 0..=last` of a row where every edge value `e[i] + step[i]·k` is ≥ 0, as an
 /// inclusive range, or `None` when there are none. Exact integer arithmetic.
