@@ -7,7 +7,11 @@
 //! CPU-time mode (for before/after comparisons on a loaded machine): `RASTER_CPU=20 cargo bench
 //! -p hybrid-cpu --bench raster` runs each pass 20 times on a 1-thread rayon pool and prints the
 //! process CPU time per frame (from `/proc/self/stat`), plus checksums of the outputs
-//! (`RASTER_THREADS=2` for a 2-thread pool).
+//! (`RASTER_THREADS=2` for a 2-thread pool). `RASTER_SCENE=room` runs it on the trace bench's
+//! generated ~270K-triangle room (untextured, seen from a corner) instead; criterion runs both.
+
+#[path = "trace_scenes/mod.rs"]
+mod trace_scenes;
 
 use criterion::{Criterion, criterion_group};
 use glam::{Vec2, Vec3};
@@ -105,23 +109,41 @@ fn bench_scene() -> (Scene, Camera) {
     (scene, camera)
 }
 
-fn raster(c: &mut Criterion) {
-    let (scene, camera) = bench_scene();
-    let prepared = PreparedScene::new(&scene);
-    let tris = prepared.triangles.len();
-    let g = rasterize(&prepared, &camera, W, H, None);
-    let covered = g.object_id.iter().filter(|&&o| o != hybrid_core::NO_OBJECT).count();
-    eprintln!("raster bench: {tris} triangles, {W}x{H}, {covered} pixels covered");
+/// The trace bench's room (~270K triangles), with the bench scene's two lights.
+fn room_scene() -> (Scene, Camera) {
+    let mut scene = trace_scenes::synthetic();
+    scene.lights = bench_scene().0.lights;
+    let camera = scene.camera;
+    (scene, camera)
+}
 
-    let mut group = c.benchmark_group("raster");
-    group.sample_size(20);
-    group.bench_function("rasterize_into_270k_tris_1280x720", |b| {
-        let mut g = GBuffer::new(W, H);
-        b.iter(|| rasterize_into(&prepared, &camera, None, &mut g));
-    });
-    group.bench_function("rasterize_alloc_270k_tris_1280x720", |b| b.iter(|| rasterize(&prepared, &camera, W, H, None)));
-    group.bench_function("deferred_lighting_1280x720", |b| b.iter(|| deferred_lighting(&g, &scene, &camera)));
-    group.finish();
+/// The scene `RASTER_SCENE` names: `spheres` (default) or `room`.
+fn chosen_scene() -> (Scene, Camera) {
+    match std::env::var("RASTER_SCENE").as_deref() {
+        Ok("room") => room_scene(),
+        Ok("spheres") | Err(_) => bench_scene(),
+        Ok(other) => panic!("RASTER_SCENE must be spheres or room, not `{other}`"),
+    }
+}
+
+fn raster(c: &mut Criterion) {
+    for (name, (scene, camera)) in [("270k_tris", bench_scene()), ("room_270k_tris", room_scene())] {
+        let prepared = PreparedScene::new(&scene);
+        let tris = prepared.triangles.len();
+        let g = rasterize(&prepared, &camera, W, H, None);
+        let covered = g.object_id.iter().filter(|&&o| o != hybrid_core::NO_OBJECT).count();
+        eprintln!("raster bench {name}: {tris} triangles, {W}x{H}, {covered} pixels covered");
+
+        let mut group = c.benchmark_group("raster");
+        group.sample_size(20);
+        group.bench_function(format!("rasterize_into_{name}_1280x720"), |b| {
+            let mut g = GBuffer::new(W, H);
+            b.iter(|| rasterize_into(&prepared, &camera, None, &mut g));
+        });
+        group.bench_function(format!("rasterize_alloc_{name}_1280x720"), |b| b.iter(|| rasterize(&prepared, &camera, W, H, None)));
+        group.bench_function(format!("deferred_lighting_{name}_1280x720"), |b| b.iter(|| deferred_lighting(&g, &scene, &camera)));
+        group.finish();
+    }
 }
 
 /// Process CPU time (user + system) in ms, from `/proc/self/stat` (Linux; 0 elsewhere).
@@ -139,8 +161,9 @@ fn checksum<T: Copy>(v: &[T], bits: impl Fn(T) -> Vec<u32>) -> u64 {
 }
 
 fn cpu_mode(iters: u32) {
-    let (scene, camera) = bench_scene();
+    let (scene, camera) = chosen_scene();
     let prepared = PreparedScene::new(&scene);
+    eprintln!("{} triangles", prepared.triangles.len());
     let threads = std::env::var("RASTER_THREADS").ok().and_then(|v| v.parse::<usize>().ok()).unwrap_or(1);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
     let mut g = GBuffer::new(W, H);
