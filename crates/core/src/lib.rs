@@ -7,6 +7,7 @@ pub mod blend;
 pub mod buffers;
 pub mod depth_merge;
 pub mod frame;
+pub mod lanes;
 pub mod report;
 pub mod shading;
 

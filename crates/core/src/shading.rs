@@ -6,6 +6,7 @@ use hybrid_scene::texture::Texture;
 use hybrid_scene::{DirectionalLight, Environment, Lights, PointLight, Skybox, SpotLight, specular_exponent};
 
 use crate::buffers::Surface;
+use crate::lanes::{V3, aos, dot3, normalize_or_zero3, soa, splat3};
 
 /// Rec. 709 luminance of a linear colour.
 pub fn luminance(c: Vec3) -> f32 {
@@ -319,42 +320,6 @@ impl FrameLights {
         }
         aos(c)
     }
-}
-
-/// Three components of four lanes (structure of arrays).
-type V3 = [Vec4; 3];
-
-fn soa(v: [Vec3; 4]) -> V3 {
-    [0, 1, 2].map(|k| Vec4::new(v[0][k], v[1][k], v[2][k], v[3][k]))
-}
-
-fn aos(v: V3) -> [Vec3; 4] {
-    let [x, y, z] = v.map(|a| a.to_array());
-    [0, 1, 2, 3].map(|i| Vec3::new(x[i], y[i], z[i]))
-}
-
-fn splat3(v: Vec3) -> V3 {
-    [Vec4::splat(v.x), Vec4::splat(v.y), Vec4::splat(v.z)]
-}
-
-/// `Vec3::dot` lane by lane: `(x·x′ + y·y′) + z·z′`.
-#[inline]
-fn dot3(a: V3, b: V3) -> Vec4 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// `Vec3::normalize_or(fallback)` lane by lane: `v · (1 / √(v · v))` where that reciprocal is
-/// finite and positive.
-#[inline]
-fn normalize_or3(v: V3, fallback: V3) -> V3 {
-    let rcp = Vec4::ONE / dot3(v, v).sqrt();
-    let ok = rcp.is_finite_mask() & rcp.cmpgt(Vec4::ZERO);
-    [0, 1, 2].map(|k| Vec4::select(ok, v[k] * rcp, fallback[k]))
-}
-
-#[inline]
-fn normalize_or_zero3(v: V3) -> V3 {
-    normalize_or3(v, [Vec4::ZERO; 3])
 }
 
 impl FrameLight {
