@@ -4,6 +4,7 @@
 
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use hybrid_core::Surface;
+use hybrid_core::lanes::{V3, lane, lerp3, normalize_or3, splat3};
 use hybrid_scene::model::normal_matrix;
 use hybrid_scene::{Aabb, ColorSpace, Material, Scene, Texture};
 
@@ -171,11 +172,11 @@ impl TriangleSurface<'_> {
 
     /// The surface at barycentric coordinates `bary` with UV footprint `uv_footprint`; see
     /// [`PreparedScene::surface_at`].
-    #[inline]
+    #[inline(always)]
     pub fn at(&self, bary: Vec3, uv_footprint: f32) -> Surface {
         let lerp3 = |v: [Vec3; 3]| v[0] * bary.x + v[1] * bary.y + v[2] * bary.z;
         let position = lerp3(self.positions);
-        let mut normal = match self.normals {
+        let normal = match self.normals {
             None => self.geometric,
             // `normalize_or(geometric_normal(..))`, the fallback only computed when taken.
             Some(n) => {
@@ -184,26 +185,63 @@ impl TriangleSurface<'_> {
                 if rcp.is_finite() && rcp > 0.0 { n * rcp } else { geometric_normal(self.positions) }
             }
         };
-        let mat = self.material;
         let color = self.colors.map_or(Vec3::ONE, lerp3);
         if !self.textured {
-            // No maps: every sample would be 1 (multiplying by it is exact), so skip them.
-            return Surface {
-                position,
-                normal,
-                emission: mat.emission,
-                ambient: mat.ambient,
-                diffuse: mat.diffuse * color,
-                opacity: mat.opacity.clamp(0.0, 1.0),
-                specular: mat.specular,
-                shininess: mat.shininess.clamp(0.0, 1.0),
-                reflectivity: mat.reflectivity.clamp(0.0, 1.0),
-                ior: mat.ior,
-            };
+            return self.untextured(position, normal, color);
         }
         let uv = self.uvs.map_or(Vec2::ZERO, |u| u[0] * bary.x + u[1] * bary.y + u[2] * bary.z);
+        let uv = self.material.offset + uv * self.material.tiling;
+        self.textured(Point { position, normal, color, uv }, bary, uv_footprint)
+    }
+
+    /// Whether the material has any texture map (else [`Self::plain4`] applies).
+    #[inline]
+    pub fn is_textured(&self) -> bool {
+        self.textured
+    }
+
+    /// [`Self::at`] at four points of a triangle without texture maps (barycentrics as lanes),
+    /// lane by lane bit for bit: the position, normal and diffuse colour of each lane, and the
+    /// surface's constant fields (in a [`Surface`] whose position, normal and diffuse are
+    /// those of lane 0).
+    #[inline(always)]
+    pub fn plain4(&self, bary: V3) -> Plain4 {
+        debug_assert!(!self.textured);
+        let position = lerp3(self.positions, bary);
+        let normal = match self.normals {
+            None => splat3(self.geometric),
+            Some(n) => normalize_or3(lerp3(n, bary), splat3(geometric_normal(self.positions))),
+        };
+        let color = self.colors.map_or(splat3(Vec3::ONE), |c| lerp3(c, bary));
+        let d = self.material.diffuse;
+        let diffuse = [Vec4::splat(d.x) * color[0], Vec4::splat(d.y) * color[1], Vec4::splat(d.z) * color[2]];
+        Plain4 { position, normal, diffuse, constant: self.untextured(lane(position, 0), lane(normal, 0), lane(color, 0)) }
+    }
+
+    /// The surface of a triangle without texture maps: every sample would be 1 (multiplying by
+    /// it is exact), so none is taken.
+    #[inline(always)]
+    fn untextured(&self, position: Vec3, normal: Vec3, color: Vec3) -> Surface {
+        let mat = self.material;
+        Surface {
+            position,
+            normal,
+            emission: mat.emission,
+            ambient: mat.ambient,
+            diffuse: mat.diffuse * color,
+            opacity: mat.opacity.clamp(0.0, 1.0),
+            specular: mat.specular,
+            shininess: mat.shininess.clamp(0.0, 1.0),
+            reflectivity: mat.reflectivity.clamp(0.0, 1.0),
+            ior: mat.ior,
+        }
+    }
+
+    /// The textured surface at an interpolated point (`bary` for the tangents of normal mapping).
+    #[inline(always)]
+    fn textured(&self, Point { position, mut normal, color, uv }: Point, bary: Vec3, uv_footprint: f32) -> Surface {
+        let mat = self.material;
         let tex = self.textures;
-        let uv = mat.offset + uv * mat.tiling;
         let footprint = uv_footprint * mat.tiling.abs().max_element();
         // Absent maps sample as 1 (inline); present ones through one out-of-line call each.
         let sample = |id: Option<usize>| -> Vec4 {
@@ -242,6 +280,27 @@ impl TriangleSurface<'_> {
             ior: mat.ior * o.y,
         }
     }
+}
+
+/// Four surfaces of a triangle without texture maps ([`TriangleSurface::plain4`]): what
+/// varies, as lanes, and what does not.
+#[derive(Clone, Copy)]
+pub struct Plain4 {
+    pub position: V3,
+    pub normal: V3,
+    pub diffuse: V3,
+    /// Emission, ambient, opacity, specular, shininess, reflectivity and IOR of all four.
+    pub constant: Surface,
+}
+
+/// A point of a triangle before its material: interpolated position, normal (before normal
+/// mapping), vertex colour and (offset, tiled) UV.
+#[derive(Clone, Copy)]
+struct Point {
+    position: Vec3,
+    normal: Vec3,
+    color: Vec3,
+    uv: Vec2,
 }
 
 /// Trilinear texture sample for a UV footprint (UV units per pixel): exactly (bit for bit)
@@ -414,6 +473,55 @@ mod tests {
             }
         }
         assert!(checked > 100, "only {checked} points checked");
+    }
+
+    #[test]
+    fn four_lane_plain_surfaces_match_at_bit_for_bit() {
+        let mut scene = hybrid_scene::demo_scene();
+        for (k, m) in scene.materials.iter_mut().enumerate() {
+            m.opacity = 1.5 - 0.4 * k as f32;
+            m.shininess = -0.2 + 0.3 * k as f32;
+        }
+        let prepared = PreparedScene::new(&scene);
+        let mut rng = Rng(11);
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        let mut checked = 0;
+        for &t in prepared.triangles.iter().step_by(5) {
+            let plain = prepared.triangle_surface(t);
+            if plain.textured {
+                continue;
+            }
+            // As it is; with vertex colours; with normals that cancel at (½, ½, 0) (the
+            // geometric-normal fallback); flat.
+            let n = plain.normals.unwrap_or([Vec3::Y; 3])[0];
+            let variants = [
+                plain,
+                TriangleSurface { colors: Some([Vec3::new(1.0, 0.2, -0.0), Vec3::new(0.0, 0.5, 1.0), Vec3::ONE]), ..plain },
+                TriangleSurface { normals: Some([n, -n, Vec3::ZERO]), ..plain },
+                TriangleSurface { normals: None, geometric: geometric_normal(plain.positions), ..plain },
+            ];
+            for ts in variants {
+                let mut b = [0, 1, 2, 3].map(|_| {
+                    let b = Vec3::new(rng.f(), rng.f(), rng.f());
+                    b / (b.x + b.y + b.z)
+                });
+                b[1] = Vec3::new(0.5, 0.5, 0.0);
+                let four = ts.plain4(hybrid_core::lanes::soa(b));
+                for (k, &b) in b.iter().enumerate() {
+                    let one = ts.at(b, 0.0);
+                    let c = &four.constant;
+                    let lane = |v| lane(v, k);
+                    assert_eq!(bits(lane(four.position)), bits(one.position), "{t:?} at {b}");
+                    assert_eq!(bits(lane(four.normal)), bits(one.normal), "{t:?} at {b}");
+                    assert_eq!(bits(lane(four.diffuse)), bits(one.diffuse), "{t:?} at {b}");
+                    assert_eq!([c.emission, c.ambient, c.specular].map(bits), [one.emission, one.ambient, one.specular].map(bits));
+                    let scalars = |s: &Surface| [s.opacity, s.shininess, s.reflectivity, s.ior].map(f32::to_bits);
+                    assert_eq!(scalars(c), scalars(&one));
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 400, "only {checked} points checked");
     }
 
     #[test]

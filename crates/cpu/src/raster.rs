@@ -14,17 +14,20 @@
 //!    triangle order with integer edge functions and the top-left rule into a local visibility
 //!    buffer (triangle id + depth; long rows walk only their exactly computed covered span, not
 //!    the whole bounding box), then shades only the winner of each pixel with
-//!    [`PreparedScene::surface_at`] (deferred: no cost for overdraw).
+//!    [`PreparedScene::surface_at`] (deferred: no cost for overdraw). Runs of one winner go four
+//!    pixels at a time: barycentrics, UV footprints and (for triangles without texture maps)
+//!    the whole surface as SIMD lanes, each lane bit for bit the one-pixel result.
 //!
 //! Output is bit-identical for any number of threads: chunking and banding are fixed, each
 //! band runs its triangles in scene order, and equal depths keep the earlier triangle.
 
-use glam::{DMat3, DMat4, DVec3, Mat4, Vec3, Vec4};
+use glam::{BVec4A, DMat3, DMat4, DVec3, Mat4, Vec3, Vec4};
+use hybrid_core::lanes::{V3, aos};
 use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
-use crate::prepare::{PreparedScene, TriangleRef, TriangleSurface};
+use crate::prepare::{Plain4, PreparedScene, TriangleRef, TriangleSurface};
 
 /// Rows per band (the unit of parallel work and of binning).
 pub const BAND_ROWS: u32 = 16;
@@ -306,6 +309,19 @@ impl ShadeTri {
         let sum = bw.x + bw.y + bw.z;
         let b = bw / sum;
         (sum.is_finite() && sum != 0.0 && b.is_finite()).then_some(b)
+    }
+
+    /// [`Self::bary`] at four pixel positions `px` (lanes) of row position `py`, lane by lane
+    /// bit for bit: the barycentrics, and which lanes `bary` gives (the others hold anything).
+    #[inline]
+    fn bary4(&self, px: Vec4, py: f32) -> (V3, BVec4A) {
+        let (dx, dy) = (px - Vec4::splat(self.ref_px[0]), Vec4::splat(py - self.ref_px[1]));
+        // `planes[i] · (1, dx, dy)`, with its multiplication by 1, so NaNs match too.
+        let bw = self.planes.map(|p| Vec4::splat(p.x) * Vec4::ONE + Vec4::splat(p.y) * dx + Vec4::splat(p.z) * dy);
+        let sum = bw[0] + bw[1] + bw[2];
+        let b = bw.map(|v| v / sum);
+        let finite = b[0].is_finite_mask() & b[1].is_finite_mask() & b[2].is_finite_mask();
+        (b, sum.is_finite_mask() & sum.cmpne(Vec4::ZERO) & finite)
     }
 }
 
@@ -713,6 +729,24 @@ impl BandRows<'_> {
         self.depth[i] = depth;
     }
 
+    /// [`Self::write`] of the four surfaces of `s` at pixels `i..i + 4`.
+    #[inline(always)]
+    fn write4(&mut self, i: usize, object_id: u32, depth: &[f32], s: &Plain4) {
+        let c = &s.constant;
+        let r = i..i + 4;
+        self.position[r.clone()].copy_from_slice(&aos(s.position));
+        self.normal[r.clone()].copy_from_slice(&aos(s.normal));
+        self.emission[r.clone()].fill(c.emission);
+        self.ambient[r.clone()].fill(c.ambient);
+        for (d, v) in self.diffuse[r.clone()].iter_mut().zip(aos(s.diffuse)) {
+            *d = v.extend(c.opacity);
+        }
+        self.specular[r.clone()].fill(c.specular.extend(c.shininess));
+        self.optical[r.clone()].fill(Vec3::new(c.reflectivity, c.ior, c.opacity));
+        self.object_id[r.clone()].fill(object_id);
+        self.depth[r].copy_from_slice(depth);
+    }
+
     /// What [`GBuffer::new`] holds in a pixel (a test checks they agree).
     #[inline]
     pub(crate) fn clear(&mut self, i: usize) {
@@ -949,13 +983,24 @@ struct BandScratch {
 
 /// Clamps perspective-correct barycentrics to the triangle (covered pixels lie inside the
 /// snapped triangle; this removes the tiny overshoot of snapping); `None` → the centroid.
+/// (Negative components become +0, others, −0 included, stay: a select, not `f32::max`, whose
+/// choice between ±0 is unspecified, so that [`clamp_bary4`] can match it lane for lane.)
 #[inline]
 fn clamp_bary(b: Option<Vec3>) -> Vec3 {
     b.map_or(Vec3::splat(1.0 / 3.0), |b| {
-        let b = b.max(Vec3::ZERO);
+        let b = Vec3::select(b.cmplt(Vec3::ZERO), Vec3::ZERO, b);
         let s = b.x + b.y + b.z;
         if s > 0.0 { b / s } else { Vec3::splat(1.0 / 3.0) }
     })
+}
+
+/// [`clamp_bary`] of four lanes ([`ShadeTri::bary4`]'s barycentrics and valid lanes).
+#[inline]
+fn clamp_bary4((b, valid): (V3, BVec4A)) -> V3 {
+    let b = b.map(|v| Vec4::select(v.cmplt(Vec4::ZERO), Vec4::ZERO, v));
+    let s = b[0] + b[1] + b[2];
+    let ok = valid & s.cmpgt(Vec4::ZERO);
+    b.map(|v| Vec4::select(ok, v / s, Vec4::splat(1.0 / 3.0)))
 }
 
 /// Where [`shade_run`] writes: one row of a band's G-buffer rows.
@@ -977,6 +1022,16 @@ impl Pixels<'_, '_> {
             self.out.mask[j] = 0.0;
         }
     }
+
+    /// [`Self::emit`] of pixels `x..x + 4` (the lanes of `s`).
+    #[inline(always)]
+    fn emit4(&mut self, x: u32, s: &Plain4) {
+        let j = self.row_base + x as usize;
+        self.out.write4(j, self.object, &self.depth[j..j + 4], s);
+        if self.clear {
+            self.out.mask[j..j + 4].fill(0.0);
+        }
+    }
 }
 
 /// The surfaces of the winning triangle at pixels `x0..x1` of row `y` (one run of one winner),
@@ -984,10 +1039,24 @@ impl Pixels<'_, '_> {
 #[inline]
 fn shade_run(st: &ShadeTri, ts: &TriangleSurface<'_>, x0: u32, x1: u32, y: u32, mut px_out: Pixels<'_, '_>) {
     let py = y as f32 + 0.5;
+    // The centres of pixels x..x + 4, as `shade` computes one.
+    let centres = |x: u32| Vec4::new(x as f32 + 0.5, (x + 1) as f32 + 0.5, (x + 2) as f32 + 0.5, (x + 3) as f32 + 0.5);
     match ts.uvs() {
         // Pixel centres x + 0.5 are exact in f32 below 2²², so the planes one pixel right of
         // pixel x (`px + 1`) are those of pixel x + 1 bit for bit: computed once, used twice.
         Some(uvs) if ts.uses_footprint() && x1 < 1 << 22 => {
+            // Barycentrics and footprints four pixels at a time, then the surfaces one at a time.
+            let mut x0 = x0;
+            while x0 + 4 <= x1 {
+                let here = st.bary4(centres(x0), py);
+                let (right, down) = (st.bary4(centres(x0 + 1), py), st.bary4(centres(x0), py + 1.0));
+                let b = clamp_bary4(here);
+                let footprints = footprint4(uvs, b, right, down);
+                for (k, footprint) in footprints.into_iter().enumerate() {
+                    px_out.emit(x0 + k as u32, &ts.at(hybrid_core::lanes::lane(b, k), footprint));
+                }
+                x0 += 4;
+            }
             let mut here = st.bary(x0 as f32 + 0.5, py);
             for x in x0..x1 {
                 let px = x as f32 + 0.5;
@@ -996,6 +1065,17 @@ fn shade_run(st: &ShadeTri, ts: &TriangleSurface<'_>, x0: u32, x1: u32, y: u32, 
                 let b = clamp_bary(here);
                 px_out.emit(x, &ts.at(b, footprint(uvs, b, right, down)));
                 here = right;
+            }
+        }
+        // No texture: four pixels at a time, then one at a time (the same surfaces).
+        _ if !ts.is_textured() => {
+            let mut x0 = x0;
+            while x0 + 4 <= x1 {
+                px_out.emit4(x0, &ts.plain4(clamp_bary4(st.bary4(centres(x0), py))));
+                x0 += 4;
+            }
+            for x in x0..x1 {
+                px_out.emit(x, &shade(st, ts, x, y));
             }
         }
         _ => {
@@ -1021,6 +1101,31 @@ fn footprint([u0, u1, u2]: [glam::Vec2; 3], b: Vec3, right: Option<Vec3>, down: 
         (None, None) => 0.0,
     };
     if f.is_finite() { f } else { 0.0 }
+}
+
+/// [`footprint`] at four pixels: clamped barycentrics `b` as lanes, and the raw barycentrics
+/// (with their valid lanes, [`ShadeTri::bary4`]) one pixel right and one down.
+#[inline]
+fn footprint4([u0, u1, u2]: [glam::Vec2; 3], b: V3, right: (V3, BVec4A), down: (V3, BVec4A)) -> [f32; 4] {
+    let uv = |b: V3| [0, 1].map(|k| Vec4::splat(u0[k]) * b[0] + Vec4::splat(u1[k]) * b[1] + Vec4::splat(u2[k]) * b[2]);
+    let at = uv(b);
+    // `Vec2::distance`: √(d.x² + d.y²) of the difference.
+    let distance = |n: V3| {
+        let q = uv(n);
+        let d = [q[0] - at[0], q[1] - at[1]];
+        (d[0] * d[0] + d[1] * d[1]).sqrt()
+    };
+    let (dx, dy) = (distance(right.0), distance(down.0));
+    let (vx, vy) = (right.1.bitmask(), down.1.bitmask());
+    [0, 1, 2, 3].map(|k| {
+        let f = match (vx >> k & 1 != 0, vy >> k & 1 != 0) {
+            (true, true) => dx[k].max(dy[k]),
+            (true, false) => dx[k],
+            (false, true) => dy[k],
+            (false, false) => 0.0,
+        };
+        if f.is_finite() { f } else { 0.0 }
+    })
 }
 
 /// The surface of the winning triangle at pixel (x, y).
@@ -1262,11 +1367,16 @@ mod tests {
             material,
             ..Default::default()
         };
+        // Untextured (the four-pixel path) with vertex colours, and with zero normals (the
+        // geometric-normal fallback).
+        let coloured = Mesh { colors: vec![Vec3::new(1.0, 0.2, 0.0), Vec3::new(0.0, 0.5, 1.0), Vec3::ONE], ..mesh(1, true) };
+        let zero_normals = Mesh { normals: vec![Vec3::ZERO; 3], ..mesh(1, true) };
+        let meshes = vec![mesh(0, true), mesh(0, false), mesh(1, true), mesh(1, false), coloured, zero_normals];
         scene.objects = vec![Object {
             name: "o".into(),
             source: ObjectSource::Plane,
             transform: Transform::default(),
-            meshes: vec![mesh(0, true), mesh(0, false), mesh(1, true)],
+            meshes,
             relevance: 1.0,
             cost: 1.0,
         }];
@@ -1293,9 +1403,56 @@ mod tests {
                     let px = Pixels { out: &mut rows[0], row_base: (y * w) as usize, depth: &depth, object: 7, clear: false };
                     shade_run(&st, &ts, x0, x1, y, px);
                 }
-                assert_eq!(a, b, "triangle {t:?}, planes {planes:?}");
+                assert_eq!(gbuffer_bits(&a), gbuffer_bits(&b), "triangle {t:?}, planes {planes:?}");
             }
         }
+    }
+
+    /// Every bit of every target (f32 equality would let −0 = +0 and NaN ≠ NaN through).
+    fn gbuffer_bits(g: &GBuffer) -> Vec<u32> {
+        let v3 = |v: &[Vec3]| v.iter().flat_map(|v| v.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+        let v4 = |v: &[Vec4]| v.iter().flat_map(|v| v.to_array().map(f32::to_bits)).collect::<Vec<_>>();
+        let f = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        [v3(&g.position), v3(&g.normal), v3(&g.emission), v3(&g.ambient), v4(&g.diffuse), v4(&g.specular), v3(&g.optical)]
+            .concat()
+            .into_iter()
+            .chain(g.object_id.iter().copied())
+            .chain(f(&g.mask))
+            .chain(f(&g.depth))
+            .collect()
+    }
+
+    #[test]
+    fn four_pixel_barycentrics_match_one_pixel_bit_for_bit() {
+        let mut rng = Rng(0x5eed_f0ba_7700);
+        let mut f = || (rng.next() % 4001) as f32 / 1000.0 - 2.0;
+        let special = [0.0, -0.0, 1e-38, -1e30, f32::INFINITY, f32::NAN];
+        let (mut valid, mut invalid) = (0, 0);
+        for k in 0..4000 {
+            let mut planes = [0, 1, 2].map(|_| Vec3::new(f(), f() * 0.1, f() * 0.1));
+            if k % 5 == 0 {
+                // Awkward planes: zero, huge, infinite or NaN coefficients.
+                planes[k / 5 % 3][k / 15 % 3] = special[k / 45 % special.len()];
+            }
+            let st = ShadeTri { triangle: TriangleRef { mesh: 0, triangle: 0 }, ref_px: [f() * 50.0, f() * 50.0], planes };
+            let (x, y) = ((f() * 40.0 + 80.0) as u32, f() * 30.0 + 40.0);
+            let px = Vec4::new(x as f32 + 0.5, (x + 1) as f32 + 0.5, (x + 2) as f32 + 0.5, (x + 3) as f32 + 0.5);
+            let (b4, ok) = st.bary4(px, y);
+            let clamped = clamp_bary4((b4, ok));
+            for lane in 0..4 {
+                let one = st.bary(px[lane], y);
+                assert_eq!(ok.bitmask() >> lane & 1 != 0, one.is_some(), "planes {planes:?} at {}", px[lane]);
+                if let Some(b) = one {
+                    assert_eq!(hybrid_core::lanes::lane(b4, lane).to_array().map(f32::to_bits), b.to_array().map(f32::to_bits));
+                    valid += 1;
+                } else {
+                    invalid += 1;
+                }
+                let c = hybrid_core::lanes::lane(clamped, lane);
+                assert_eq!(c.to_array().map(f32::to_bits), clamp_bary(one).to_array().map(f32::to_bits), "planes {planes:?}");
+            }
+        }
+        assert!(valid > 10_000 && invalid > 100, "{valid} valid, {invalid} invalid lanes");
     }
 
     #[test]
