@@ -261,13 +261,8 @@ fn round_to_i32(x: f32) -> i32 {
     let t = x as i32; // truncated (saturating)
     // Exact where it matters (|x| < 2²³); beyond, x is integral or t saturated.
     let frac = x - t as f32;
-    if frac >= 0.5 {
-        t.saturating_add(1)
-    } else if frac <= -0.5 {
-        t.saturating_sub(1)
-    } else {
-        t
-    }
+    // Branch-free: the fraction is as good as random, so branches on it mispredict.
+    t.saturating_add(i32::from(frac >= 0.5)).saturating_sub(i32::from(frac <= -0.5))
 }
 
 // ---------------------------------------------------------------------------------------------
