@@ -4,7 +4,7 @@
 
 use glam::{Mat3, Vec2, Vec3, Vec4};
 use hybrid_core::Surface;
-use hybrid_core::lanes::{V3, lane, lerp3, normalize_or3, splat3};
+use hybrid_core::lanes::{V3, lerp3, normalize_or3, splat3};
 use hybrid_scene::model::normal_matrix;
 use hybrid_scene::{Aabb, ColorSpace, Material, Scene, Texture};
 
@@ -176,7 +176,7 @@ impl TriangleSurface<'_> {
     pub fn at(&self, bary: Vec3, uv_footprint: f32) -> Surface {
         let lerp3 = |v: [Vec3; 3]| v[0] * bary.x + v[1] * bary.y + v[2] * bary.z;
         let position = lerp3(self.positions);
-        let normal = match self.normals {
+        let mut normal = match self.normals {
             None => self.geometric,
             // `normalize_or(geometric_normal(..))`, the fallback only computed when taken.
             Some(n) => {
@@ -190,57 +190,8 @@ impl TriangleSurface<'_> {
             return self.untextured(position, normal, color);
         }
         let uv = self.uvs.map_or(Vec2::ZERO, |u| u[0] * bary.x + u[1] * bary.y + u[2] * bary.z);
-        let uv = self.material.offset + uv * self.material.tiling;
-        self.textured(Point { position, normal, color, uv }, bary, uv_footprint)
-    }
-
-    /// Whether the material has any texture map (else [`Self::plain4`] applies).
-    #[inline]
-    pub fn is_textured(&self) -> bool {
-        self.textured
-    }
-
-    /// [`Self::at`] at four points of a triangle without texture maps (barycentrics as lanes),
-    /// lane by lane bit for bit: the position, normal and diffuse colour of each lane, and the
-    /// surface's constant fields (in a [`Surface`] whose position, normal and diffuse are
-    /// those of lane 0).
-    #[inline(always)]
-    pub fn plain4(&self, bary: V3) -> Plain4 {
-        debug_assert!(!self.textured);
-        let position = lerp3(self.positions, bary);
-        let normal = match self.normals {
-            None => splat3(self.geometric),
-            Some(n) => normalize_or3(lerp3(n, bary), splat3(geometric_normal(self.positions))),
-        };
-        let color = self.colors.map_or(splat3(Vec3::ONE), |c| lerp3(c, bary));
-        let d = self.material.diffuse;
-        let diffuse = [Vec4::splat(d.x) * color[0], Vec4::splat(d.y) * color[1], Vec4::splat(d.z) * color[2]];
-        Plain4 { position, normal, diffuse, constant: self.untextured(lane(position, 0), lane(normal, 0), lane(color, 0)) }
-    }
-
-    /// The surface of a triangle without texture maps: every sample would be 1 (multiplying by
-    /// it is exact), so none is taken.
-    #[inline(always)]
-    fn untextured(&self, position: Vec3, normal: Vec3, color: Vec3) -> Surface {
         let mat = self.material;
-        Surface {
-            position,
-            normal,
-            emission: mat.emission,
-            ambient: mat.ambient,
-            diffuse: mat.diffuse * color,
-            opacity: mat.opacity.clamp(0.0, 1.0),
-            specular: mat.specular,
-            shininess: mat.shininess.clamp(0.0, 1.0),
-            reflectivity: mat.reflectivity.clamp(0.0, 1.0),
-            ior: mat.ior,
-        }
-    }
-
-    /// The textured surface at an interpolated point (`bary` for the tangents of normal mapping).
-    #[inline(always)]
-    fn textured(&self, Point { position, mut normal, color, uv }: Point, bary: Vec3, uv_footprint: f32) -> Surface {
-        let mat = self.material;
+        let uv = mat.offset + uv * mat.tiling;
         let tex = self.textures;
         let footprint = uv_footprint * mat.tiling.abs().max_element();
         // Absent maps sample as 1 (inline); present ones through one out-of-line call each.
@@ -280,6 +231,48 @@ impl TriangleSurface<'_> {
             ior: mat.ior * o.y,
         }
     }
+
+    /// Whether the material has any texture map (else [`Self::plain4`] applies).
+    #[inline]
+    pub fn is_textured(&self) -> bool {
+        self.textured
+    }
+
+    /// [`Self::at`] at four points of a triangle without texture maps (barycentrics as lanes),
+    /// lane by lane bit for bit: the position, normal and diffuse colour of each lane, and the
+    /// fields all four share.
+    #[inline(always)]
+    pub fn plain4(&self, bary: V3) -> Plain4 {
+        debug_assert!(!self.textured);
+        let position = lerp3(self.positions, bary);
+        let normal = match self.normals {
+            None => splat3(self.geometric),
+            Some(n) => normalize_or3(lerp3(n, bary), splat3(geometric_normal(self.positions))),
+        };
+        let color = self.colors.map_or(splat3(Vec3::ONE), |c| lerp3(c, bary));
+        let d = self.material.diffuse;
+        let diffuse = [Vec4::splat(d.x) * color[0], Vec4::splat(d.y) * color[1], Vec4::splat(d.z) * color[2]];
+        Plain4 { position, normal, diffuse, constant: self.untextured(Vec3::ZERO, Vec3::ZERO, Vec3::ONE) }
+    }
+
+    /// The surface of a triangle without texture maps: every sample would be 1 (multiplying by
+    /// it is exact), so none is taken.
+    #[inline(always)]
+    fn untextured(&self, position: Vec3, normal: Vec3, color: Vec3) -> Surface {
+        let mat = self.material;
+        Surface {
+            position,
+            normal,
+            emission: mat.emission,
+            ambient: mat.ambient,
+            diffuse: mat.diffuse * color,
+            opacity: mat.opacity.clamp(0.0, 1.0),
+            specular: mat.specular,
+            shininess: mat.shininess.clamp(0.0, 1.0),
+            reflectivity: mat.reflectivity.clamp(0.0, 1.0),
+            ior: mat.ior,
+        }
+    }
 }
 
 /// Four surfaces of a triangle without texture maps ([`TriangleSurface::plain4`]): what
@@ -289,18 +282,9 @@ pub struct Plain4 {
     pub position: V3,
     pub normal: V3,
     pub diffuse: V3,
-    /// Emission, ambient, opacity, specular, shininess, reflectivity and IOR of all four.
+    /// Emission, ambient, opacity, specular, shininess, reflectivity and IOR of all four (its
+    /// position, normal and diffuse colour are not the lanes': read those above).
     pub constant: Surface,
-}
-
-/// A point of a triangle before its material: interpolated position, normal (before normal
-/// mapping), vertex colour and (offset, tiled) UV.
-#[derive(Clone, Copy)]
-struct Point {
-    position: Vec3,
-    normal: Vec3,
-    color: Vec3,
-    uv: Vec2,
 }
 
 /// Trilinear texture sample for a UV footprint (UV units per pixel): exactly (bit for bit)
@@ -510,7 +494,7 @@ mod tests {
                 for (k, &b) in b.iter().enumerate() {
                     let one = ts.at(b, 0.0);
                     let c = &four.constant;
-                    let lane = |v| lane(v, k);
+                    let lane = |v| hybrid_core::lanes::lane(v, k);
                     assert_eq!(bits(lane(four.position)), bits(one.position), "{t:?} at {b}");
                     assert_eq!(bits(lane(four.normal)), bits(one.normal), "{t:?} at {b}");
                     assert_eq!(bits(lane(four.diffuse)), bits(one.diffuse), "{t:?} at {b}");

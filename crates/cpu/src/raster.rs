@@ -1362,11 +1362,9 @@ mod tests {
             material,
             ..Default::default()
         };
-        // Untextured (the four-pixel path) with vertex colours, and with zero normals (the
-        // geometric-normal fallback).
+        // Untextured (the four-pixel path) smooth, flat and with vertex colours.
         let coloured = Mesh { colors: vec![Vec3::new(1.0, 0.2, 0.0), Vec3::new(0.0, 0.5, 1.0), Vec3::ONE], ..mesh(1, true) };
-        let zero_normals = Mesh { normals: vec![Vec3::ZERO; 3], ..mesh(1, true) };
-        let meshes = vec![mesh(0, true), mesh(0, false), mesh(1, true), mesh(1, false), coloured, zero_normals];
+        let meshes = vec![mesh(0, true), mesh(0, false), mesh(1, true), mesh(1, false), coloured];
         scene.objects = vec![Object {
             name: "o".into(),
             source: ObjectSource::Plane,
