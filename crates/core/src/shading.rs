@@ -178,12 +178,6 @@ impl FrameLight {
 }
 
 impl FrameLights {
-    /// Light `k` (in [`lights`] order): [`Light::incident`], bit for bit.
-    #[inline]
-    pub fn incident(&self, k: usize, p: Vec3) -> (Vec3, Vec3) {
-        self.lights[k].incident(p)
-    }
-
     /// Number of lights.
     pub fn len(&self) -> usize {
         self.lights.len()
@@ -203,14 +197,8 @@ impl FrameLights {
         self.lights[k].incident_and_distance(p)
     }
 
-    /// Light `k` (in [`lights`] order): [`Light::blinn_phong`], bit for bit.
-    #[inline]
-    pub fn blinn_phong(&self, k: usize, s: &Surface, view: Vec3) -> Vec3 {
-        blinn_phong_from(self.lights[k].incident(s.position), s, view)
-    }
-
-    /// [`Self::blinn_phong`] for light arriving as `(direction, radiance)` already evaluated
-    /// (by [`Self::incident_and_distance`]) at `s.position`.
+    /// [`Light::blinn_phong`], bit for bit, for light arriving as `(direction, radiance)` already
+    /// evaluated (by [`Self::incident_and_distance`]) at `s.position`.
     #[inline]
     pub fn blinn_phong_incident(&self, (l, radiance): (Vec3, Vec3), s: &Surface, view: Vec3) -> Vec3 {
         blinn_phong_from((l, radiance), s, view)
@@ -536,12 +524,12 @@ mod tests {
             let view = Vec3::new(r(), r(), r()).normalize_or(Vec3::Z);
             assert_eq!(bits(fast.local_lighting(&s, view)), bits(local_lighting(&s, view, &all, &env)), "{s:?} {view}");
             for (i, light) in lights(&all).enumerate() {
-                let ((l0, r0), (l1, r1)) = (fast.incident(i, s.position), light.incident(s.position));
-                assert_eq!((bits(l0), bits(r0)), (bits(l1), bits(r1)), "light {i}: {s:?}");
+                let (l1, r1) = light.incident(s.position);
                 let ((l2, d2, r2), (l3, d3)) = (fast.incident_and_distance(i, s.position), light.direction_from(s.position));
                 assert_eq!((bits(l2), bits(r2)), (bits(l1), bits(r1)), "light {i}: {s:?}");
                 assert_eq!((bits(l2), d2.to_bits()), (bits(l3), d3.to_bits()), "light {i}: {s:?}");
-                assert_eq!(bits(fast.blinn_phong(i, &s, view)), bits(light.blinn_phong(&s, view)), "light {i}: {s:?} {view}");
+                let blinn_phong = fast.blinn_phong_incident((l2, r2), &s, view);
+                assert_eq!(bits(blinn_phong), bits(light.blinn_phong(&s, view)), "light {i}: {s:?} {view}");
             }
         }
         // No lights: emission + ambient only.
