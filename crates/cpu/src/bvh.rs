@@ -572,12 +572,12 @@ impl SceneBvh {
         t_max: f32,
         cache: &mut ShadowCache,
     ) -> f32 {
-        // A cache from another tree only costs time: any pack of this tree hit by an opaque lane
-        // is a true blocker.
         if self.nodes.is_empty() {
             return 1.0;
         }
         let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
+        // A cache from another tree only costs time: any pack of this tree hit by an opaque lane
+        // is a true blocker.
         if cache.leaf != EMPTY_SLOT && leaf_packs(cache.leaf).end <= self.packs.len() {
             let range = leaf_packs(cache.leaf);
             for (pack, &shadow) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]) {
