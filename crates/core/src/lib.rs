@@ -8,8 +8,13 @@ pub mod buffers;
 pub mod depth_merge;
 pub mod frame;
 pub mod lanes;
+pub mod point_colors;
+pub mod prepare;
 pub mod report;
 pub mod shading;
+#[cfg(any(test, feature = "test-support"))]
+pub mod test_rng;
 
 pub use buffers::{FrameBuffers, GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 pub use frame::{Frame, FrameSettings, Mode};
+pub use prepare::PreparedScene;

@@ -32,7 +32,7 @@ use std::ffi::{CString, c_char, c_uint, c_void};
 use std::time::Instant;
 
 use glam::Vec3;
-use hybrid_cpu::PreparedScene;
+use hybrid_core::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
 use rayon::prelude::*;
 use trace_scenes::{load_average, rays, scenes, trace_closest_hits, trace_shadow_rays};

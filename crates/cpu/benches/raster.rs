@@ -16,7 +16,7 @@ mod trace_scenes;
 use criterion::{Criterion, criterion_group};
 use glam::{Vec2, Vec3};
 use hybrid_core::GBuffer;
-use hybrid_cpu::PreparedScene;
+use hybrid_core::PreparedScene;
 use hybrid_cpu::lighting::deferred_lighting;
 use hybrid_cpu::raster::{rasterize, rasterize_into};
 use hybrid_scene::{

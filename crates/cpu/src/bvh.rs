@@ -24,10 +24,9 @@
 //! collapsed in a fixed depth-first order.
 
 use glam::{Vec3, Vec3A, Vec4};
-use hybrid_scene::{Material, Texture};
 use rayon::prelude::*;
 
-use crate::prepare::{PreparedScene, TriangleRef};
+use hybrid_core::prepare::{PreparedScene, SHADOW_EVALUATE, TriangleRef, material_shadow};
 
 /// A ray–triangle hit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -157,10 +156,6 @@ impl Default for ShadowCache {
 /// Triangle of an unused pack lane.
 const NO_TRI: TriangleRef = TriangleRef { mesh: u32::MAX, triangle: u32::MAX };
 
-/// Shadow transparency of a slot whose opacity varies over a texture: evaluated with
-/// `surface_at` at the hit.
-pub const SHADOW_EVALUATE: f32 = -1.0;
-
 /// Triangle BVH over every triangle of a [`PreparedScene`].
 #[derive(Debug, Clone)]
 pub struct SceneBvh {
@@ -276,31 +271,6 @@ impl Prim {
     #[inline(always)]
     fn index(&self) -> u32 {
         self.lo.w.to_bits()
-    }
-}
-
-/// Shadow-ray transparency of a material: 1 when it casts no shadows, its constant
-/// `1 − opacity` when no texture can change it (no maps, or maps whose relevant channel is the
-/// same in every texel of level 0, the level shadow rays sample), else [`SHADOW_EVALUATE`]. The GPU
-/// backend's BVH uses the same classes.
-pub fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
-    if !m.casts_shadows || m.opacity <= 0.0 {
-        return 1.0;
-    }
-    if !m.opacity.is_finite() {
-        return SHADOW_EVALUATE;
-    }
-    // The value of texture channel `c` if it is the same everywhere on level 0.
-    let constant = |id: Option<usize>, c: usize| -> Option<f32> {
-        let Some(id) = id else { return Some(1.0) };
-        let t = textures.get(id)?;
-        let texels = &t.levels.first()?.texels;
-        let v = texels.first()?[c];
-        texels.iter().all(|x| x[c] == v).then(|| t.texel(0, 0, 0)[c])
-    };
-    match (constant(m.diffuse_map, 3), constant(m.optical_map, 2)) {
-        (Some(a), Some(b)) => 1.0 - (m.opacity * a * b).clamp(0.0, 1.0),
-        _ => SHADOW_EVALUATE,
     }
 }
 
@@ -961,7 +931,7 @@ fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, packer: &mut Packer) -> u32 {
 mod tests {
     use super::*;
     use glam::Vec2;
-    use hybrid_scene::{Material, Mesh, Object, ObjectSource, Scene, Texture, Transform};
+    use hybrid_scene::{Material, Mesh, Object, ObjectSource, Scene, Transform};
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
 
@@ -1223,25 +1193,5 @@ mod tests {
                 assert_eq!(bin_of(c[axis], lo[axis], scale[axis], nb), all[axis], "{c} {lo} {scale} {nb}");
             }
         }
-    }
-
-    #[test]
-    fn shadow_class_of_materials() {
-        let tex = |alphas: [u8; 4]| Texture::new("t", 2, 2, alphas.map(|a| [200, 100, 50, a]).to_vec(), hybrid_scene::ColorSpace::Srgb);
-        let textures = vec![tex([255; 4]), tex([255, 255, 0, 255]), tex([128; 4])];
-        let m = |opacity: f32, diffuse_map: Option<usize>| Material { opacity, diffuse_map, ..Default::default() };
-        assert_eq!(material_shadow(&m(1.0, None), &textures), 0.0);
-        assert_eq!(material_shadow(&m(0.25, None), &textures), 0.75);
-        assert_eq!(material_shadow(&m(1.0, Some(0)), &textures), 0.0);
-        assert_eq!(material_shadow(&m(1.0, Some(1)), &textures), SHADOW_EVALUATE);
-        assert!((material_shadow(&m(1.0, Some(2)), &textures) - (1.0 - 128.0 / 255.0)).abs() < 1e-6);
-        assert_eq!(material_shadow(&m(0.0, Some(1)), &textures), 1.0);
-        assert_eq!(material_shadow(&Material { casts_shadows: false, ..m(1.0, None) }, &textures), 1.0);
-        // A missing texture is evaluated at the hit (where `surface_at` decides).
-        assert_eq!(material_shadow(&m(1.0, Some(9)), &textures), SHADOW_EVALUATE);
-        let optical = Material { optical_map: Some(1), ..m(1.0, None) };
-        // Texture 1's blue channel is constant (50): opacity = 50/255 in sRGB → linear.
-        let tr = material_shadow(&optical, &textures);
-        assert!((tr - (1.0 - textures[1].texel(0, 0, 0).z)).abs() < 1e-6 && tr > 0.5, "{tr}");
     }
 }

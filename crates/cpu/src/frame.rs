@@ -14,8 +14,8 @@ use rayon::prelude::*;
 
 use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule};
-use crate::prepare::PreparedScene;
 use crate::{blend, lighting, raster, trace};
+use hybrid_core::prepare::PreparedScene;
 
 /// The CPU backend with everything it keeps between frames: the prepared scene, its BVH, the
 /// point-cloud capsule and the heuristic's state (S per object, ms per cost unit).

@@ -6,12 +6,6 @@ pub mod bvh;
 pub mod capsule;
 pub mod frame;
 pub mod lighting;
-pub mod prepare;
 pub mod raster;
 pub mod spheres;
 pub mod trace;
-
-#[cfg(test)]
-mod test_rng;
-
-pub use prepare::PreparedScene;

@@ -27,7 +27,7 @@ use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
-use crate::prepare::{Plain4, PreparedScene, TriangleRef, TriangleSurface};
+use hybrid_core::prepare::{Plain4, PreparedScene, TriangleRef, TriangleSurface};
 
 /// Rows per band (the unit of parallel work and of binning).
 pub const BAND_ROWS: u32 = 16;
@@ -1138,7 +1138,7 @@ fn shade(st: &ShadeTri, ts: &TriangleSurface<'_>, x: u32, y: u32) -> Surface {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_rng::Rng;
+    use hybrid_core::test_rng::Rng;
 
     fn vpt(w: u32, h: u32) -> Viewport {
         Viewport { vp: Mat4::IDENTITY, width: w, height: h, gx: 1.0 + 2.0 * GUARD_PX / w as f32, gy: 1.0 + 2.0 * GUARD_PX / h as f32 }
@@ -1156,16 +1156,14 @@ mod tests {
         c
     }
 
-    /// Coordinates for the fuzz-style tests.
-    impl Rng {
-        fn coord(&mut self, max_px: i32) -> i32 {
-            // Half the time exactly on a pixel centre or pixel corner, to hit the tie cases.
-            let px = (self.next() % max_px as u64) as i32;
-            match self.next() % 4 {
-                0 => px * SUB as i32 + HALF as i32,
-                1 => px * SUB as i32,
-                _ => px * SUB as i32 + (self.next() % SUB as u64) as i32,
-            }
+    /// A subpixel coordinate for the fuzz-style tests: half the time exactly on a pixel centre or
+    /// pixel corner, to hit the tie cases.
+    fn coord(rng: &mut Rng, max_px: i32) -> i32 {
+        let px = (rng.next() % max_px as u64) as i32;
+        match rng.next() % 4 {
+            0 => px * SUB as i32 + HALF as i32,
+            1 => px * SUB as i32,
+            _ => px * SUB as i32 + (rng.next() % SUB as u64) as i32,
         }
     }
 
@@ -1223,7 +1221,7 @@ mod tests {
         let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
         let mut checked = 0;
         for _ in 0..400 {
-            let q: Vec<[i32; 2]> = (0..4).map(|_| [rng.coord(w as i32), rng.coord(h as i32)]).collect();
+            let q: Vec<[i32; 2]> = (0..4).map(|_| [coord(&mut rng, w as i32), coord(&mut rng, h as i32)]).collect();
             // Keep convex quads in consistent order (both diagonals split it into two triangles).
             let e = |a: [i32; 2], b: [i32; 2], c: [i32; 2]| area2([a, b, c]).signum();
             let s = e(q[0], q[1], q[2]);
@@ -1258,7 +1256,7 @@ mod tests {
         let mut rng = Rng(0x5151_7a7a_0102_0304);
         let mut drawn = 0;
         for n in 0..300u32 {
-            let tri = [0, 1, 2].map(|_| [rng.coord(w as i32), rng.coord(h as i32)]);
+            let tri = [0, 1, 2].map(|_| [coord(&mut rng, w as i32), coord(&mut rng, h as i32)]);
             let Some(mut rt) = coverage(tri, &v) else { continue };
             rt.z0 = 0.5;
             rt.dzdx = 0.001;

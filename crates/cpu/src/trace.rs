@@ -36,8 +36,8 @@ use rayon::prelude::*;
 
 use crate::bvh::{SceneBvh, ShadowCache};
 use crate::capsule::PointCloudCapsule;
-use crate::prepare::PreparedScene;
 use crate::raster::split_bands;
+use hybrid_core::prepare::PreparedScene;
 
 pub use hybrid_core::report::RayCounts;
 
@@ -359,7 +359,7 @@ const PRIMARY_BAND_ROWS: usize = 4;
 /// UV change per pixel on a triangle seen along `dir` with pixel size `world` at the hit:
 /// the pixel's footprint (stretched by the viewing angle, as the raster's larger screen
 /// derivative is) times the triangle's UV-per-world-length scale.
-fn uv_footprint(prepared: &PreparedScene, t: crate::prepare::TriangleRef, dir: Vec3, world: f32) -> f32 {
+fn uv_footprint(prepared: &PreparedScene, t: hybrid_core::prepare::TriangleRef, dir: Vec3, world: f32) -> f32 {
     let mesh = &prepared.meshes[t.mesh as usize];
     if mesh.uvs.is_empty() {
         return 0.0;

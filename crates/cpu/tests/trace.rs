@@ -1,10 +1,10 @@
 //! Trace stage (paper 1 listings 8a–d) on tiny hand-built scenes with hand-computed answers.
 
 use glam::Vec3;
+use hybrid_core::PreparedScene;
 use hybrid_core::blend::blend_pixel;
 use hybrid_core::shading::Light;
 use hybrid_core::{GBuffer, Surface};
-use hybrid_cpu::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::trace::{RayCounts, TraceOutput, primary_ray_count, rt_only_gbuffer, trace};
 use hybrid_scene::primitives::{cuboid, quad};

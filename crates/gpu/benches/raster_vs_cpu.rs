@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use hybrid_core::GBuffer;
-use hybrid_cpu::prepare::PreparedScene;
+use hybrid_core::PreparedScene;
 use hybrid_gpu::lighting::LightingPass;
 use hybrid_gpu::raster::RasterPass;
 use hybrid_gpu::scene::SceneGpu;

@@ -15,7 +15,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3A;
-use hybrid_cpu::prepare::PreparedScene;
+use hybrid_core::PreparedScene;
 
 use crate::context::{GpuContext, GpuError};
 use crate::scene::{GpuTriangle, GpuVertex, SceneGpu};
@@ -28,7 +28,7 @@ pub const STACK_SIZE: usize = 64;
 
 /// Shadow classes per material, shared with the CPU backend's BVH (1, a constant transparency, or
 /// [`SHADOW_EVALUATE`]: opacity varies over a texture, evaluated with the surface at the hit).
-pub use hybrid_cpu::bvh::{SHADOW_EVALUATE, material_shadow};
+pub use hybrid_core::prepare::{SHADOW_EVALUATE, material_shadow};
 
 /// `struct BvhNode` in bvh.wgsl.
 #[repr(C)]

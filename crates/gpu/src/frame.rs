@@ -6,9 +6,9 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use hybrid_core::PreparedScene;
 use hybrid_core::report::{AdapterReport, FrameReport, RayCounts, StageTimings};
 use hybrid_core::{Frame, FrameSettings, Mode};
-use hybrid_cpu::prepare::PreparedScene;
 use hybrid_heuristic::{Heuristic, HeuristicReport, frame_input, object_inputs};
 use hybrid_scene::{Camera, Scene};
 

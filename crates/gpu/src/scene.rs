@@ -5,7 +5,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use hybrid_cpu::prepare::PreparedScene;
+use hybrid_core::PreparedScene;
 use hybrid_scene::{Camera, ColorSpace, Environment, Lights, Skybox};
 
 use crate::context::{GpuContext, GpuError};

@@ -1,7 +1,7 @@
 //! `spheres`: the RT-scene's spheres on the GPU (paper 2, DESIGN §5) as bind group 2: every
-//! point of every point cloud as a sphere of its cloud's radius, coloured by the CPU capsule's
-//! rule (file colours, the cloud's colour or the height colour map, evaluated here on the host
-//! with the same code, so albedos are bit-identical), under an obvhs BVH2 built on the CPU over
+//! point of every point cloud as a sphere of its cloud's radius, coloured by the rule both
+//! backends share (`hybrid_core::point_colors`: file colours, the cloud's colour or the height
+//! colour map, evaluated on the host, so albedos are bit-identical), under an obvhs BVH2 built on the CPU over
 //! the spheres' boxes and flattened to storage buffers.
 //!
 //! `shaders/spheres.wgsl` declares the group and traces it (`sphere_closest_hit`,
@@ -12,10 +12,9 @@
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
-use glam::{Vec3, Vec3A};
-use hybrid_cpu::capsule::{HEIGHT_HIGH, HEIGHT_LOW};
-use hybrid_scene::texture::srgb_to_linear;
-use hybrid_scene::{PointCloud, PointColoring};
+use glam::Vec3A;
+use hybrid_core::point_colors::PointColors;
+use hybrid_scene::PointCloud;
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
@@ -92,34 +91,6 @@ pub struct SphereData {
     pub depth: u32,
 }
 
-/// Linear albedo of each point of `pc`, by the CPU capsule's rule (`PointCloudCapsule`'s `albedo`).
-pub fn cloud_albedos(pc: &PointCloud) -> Vec<Vec3> {
-    let height = || {
-        let (lo, hi) = pc.points.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), p| (lo.min(p.y), hi.max(p.y)));
-        let range = hi - lo;
-        let inv_range = if range > 0.0 { 1.0 / range } else { 0.0 };
-        pc.points
-            .iter()
-            .map(|c| {
-                let h = ((c.y - lo) * inv_range).clamp(0.0, 1.0);
-                HEIGHT_LOW.lerp(HEIGHT_HIGH, h)
-            })
-            .collect()
-    };
-    match &pc.coloring {
-        PointColoring::Uniform(c) => vec![*c; pc.points.len()],
-        PointColoring::Height => height(),
-        PointColoring::FileOrHeight if pc.colors.len() == pc.points.len() && !pc.colors.is_empty() => pc
-            .colors
-            .iter()
-            .map(|c| {
-                Vec3::new(srgb_to_linear(c[0] as f32 / 255.0), srgb_to_linear(c[1] as f32 / 255.0), srgb_to_linear(c[2] as f32 / 255.0))
-            })
-            .collect(),
-        PointColoring::FileOrHeight => height(),
-    }
-}
-
 impl SphereData {
     /// Colours every point and builds the BVH (obvhs BVH2, `fast_build`) over the spheres' boxes.
     pub fn build(clouds: &[PointCloud]) -> Result<Self, String> {
@@ -139,7 +110,7 @@ impl SphereData {
             }
             cloud_consts.push(pc.specular.extend(pc.shininess).to_array());
             let r = Vec3A::splat(pc.radius);
-            for (p, a) in pc.points.iter().zip(cloud_albedos(pc)) {
+            for (p, a) in pc.points.iter().zip(PointColors::albedos(pc)) {
                 all.push(GpuSphere { center: p.to_array(), radius: pc.radius, albedo: a.to_array(), cloud: ci as u32 });
                 let c = Vec3A::from(*p);
                 aabbs.push(Aabb::new(c - r, c + r));
@@ -265,6 +236,8 @@ impl SpheresGpu {
 mod tests {
     use super::*;
     use crate::shaders::{validate, with_common};
+    use glam::Vec3;
+    use hybrid_scene::PointColoring;
 
     fn cloud(points: Vec<Vec3>, radius: f32, coloring: PointColoring) -> PointCloud {
         PointCloud {

@@ -8,8 +8,8 @@
 //! shadow casters, and seen (shaded as the capsule shades them) by secondary rays.
 
 use bytemuck::{Pod, Zeroable};
+use hybrid_core::PreparedScene;
 use hybrid_core::report::RayCounts;
-use hybrid_cpu::prepare::PreparedScene;
 use wgpu::util::DeviceExt;
 
 use crate::bvh::{BVH_WGSL, TriangleBvhGpu};

@@ -8,9 +8,9 @@ use std::time::Instant;
 
 use glam::Vec3;
 use hybrid_core::GBuffer;
+use hybrid_core::PreparedScene;
 use hybrid_core::depth_merge::{PackedRtFrame, unpack, unpack_texel};
 use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, RayGen, render_sync};
-use hybrid_cpu::prepare::PreparedScene;
 use hybrid_cpu::raster::merge_rt_layer;
 use hybrid_cpu::spheres::SphereBvh;
 use hybrid_gpu::GpuContext;

@@ -32,7 +32,7 @@ impl Lcg {
 /// out-of-range ids painted in (they must be neither counted nor selected).
 fn demo_gbuffer(w: u32, h: u32) -> (GBuffer, usize) {
     let scene = demo_scene();
-    let prepared = hybrid_cpu::PreparedScene::new(&scene);
+    let prepared = hybrid_core::PreparedScene::new(&scene);
     let mut g = hybrid_cpu::raster::rasterize(&prepared, &scene.camera, w, h, None);
     let objects = scene.objects.len();
     for y in h / 3..h / 2 {

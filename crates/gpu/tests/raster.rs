@@ -6,9 +6,9 @@
 use std::path::Path;
 
 use glam::Vec3;
+use hybrid_core::PreparedScene;
 use hybrid_core::blend::encode_srgb;
 use hybrid_core::{FrameBuffers, GBuffer, NO_OBJECT};
-use hybrid_cpu::prepare::PreparedScene;
 use hybrid_gpu::GpuContext;
 use hybrid_gpu::lighting::LightingPass;
 use hybrid_gpu::raster::RasterPass;

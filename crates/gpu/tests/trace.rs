@@ -3,9 +3,9 @@
 //! tests compare the trace stage alone. They fail (not skip) without an adapter.
 
 use glam::{Vec2, Vec3};
+use hybrid_core::PreparedScene;
 use hybrid_core::report::RayCounts;
 use hybrid_core::{FrameBuffers, GBuffer, NO_OBJECT, Surface};
-use hybrid_cpu::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::capsule::PointCloudCapsule;
 use hybrid_cpu::trace::{TraceOutput, rt_only_gbuffer, trace, trace_with_spheres};

@@ -6,8 +6,8 @@
 use std::path::Path;
 
 use glam::{Vec2, Vec3};
+use hybrid_core::PreparedScene;
 use hybrid_core::shading::reflect;
-use hybrid_cpu::PreparedScene;
 use hybrid_cpu::bvh::{SceneBvh, ShadowCache};
 use hybrid_cpu::trace::rt_only_gbuffer;
 use hybrid_scene::{Camera, Material, Mesh, Object, ObjectSource, Projection, Scene, Transform};

@@ -25,9 +25,9 @@ use hybrid_core::depth_merge::{
     MISS_TEXEL, PackedRtFrame, encode_hit, synthesize_depth, synthesize_depth_orthographic, view_z_from_depth,
     view_z_from_depth_orthographic,
 };
+use hybrid_core::point_colors::PointColors;
 use hybrid_core::shading::FrameLights;
-use hybrid_scene::texture::srgb_to_linear;
-use hybrid_scene::{Camera, Environment, Lights, PointCloud, PointColoring};
+use hybrid_scene::{Camera, Environment, Lights, PointCloud};
 use rayon::prelude::*;
 
 use crate::spheres::{BatchRay, BatchScratch, SphereBvh, SphereBvhError, TraversalStack};
@@ -299,25 +299,9 @@ impl std::fmt::Display for CapsuleError {
 
 impl std::error::Error for CapsuleError {}
 
-/// Colour map over height: brown at the cloud's lowest point, green at its highest (linear).
-pub const HEIGHT_LOW: Vec3 = Vec3::new(0.20, 0.11, 0.04);
-pub const HEIGHT_HIGH: Vec3 = Vec3::new(0.12, 0.42, 0.08);
-
-/// How one cloud's spheres get their colour.
-#[derive(Debug, Clone)]
-enum CloudColor {
-    /// sRGB colours from the file, by original point index.
-    File(Vec<[u8; 3]>),
-    Uniform(Vec3),
-    Height {
-        y_min: f32,
-        inv_range: f32,
-    },
-}
-
 struct Cloud {
     bvh: SphereBvh,
-    color: CloudColor,
+    color: PointColors,
     specular: Vec3,
     shininess: f32,
 }
@@ -325,19 +309,7 @@ struct Cloud {
 impl Cloud {
     #[inline]
     fn albedo(&self, slot: u32, center: Vec3) -> Vec3 {
-        match &self.color {
-            CloudColor::Uniform(c) => *c,
-            CloudColor::Height { y_min, inv_range } => {
-                let h = ((center.y - y_min) * inv_range).clamp(0.0, 1.0);
-                HEIGHT_LOW.lerp(HEIGHT_HIGH, h)
-            }
-            CloudColor::File(colors) => match colors.get(self.bvh.index_of_slot(slot) as usize) {
-                Some(c) => {
-                    Vec3::new(srgb_to_linear(c[0] as f32 / 255.0), srgb_to_linear(c[1] as f32 / 255.0), srgb_to_linear(c[2] as f32 / 255.0))
-                }
-                None => HEIGHT_LOW,
-            },
-        }
+        self.color.albedo(self.bvh.index_of_slot(slot) as usize, center)
     }
 }
 
@@ -396,19 +368,7 @@ impl PointCloudCapsule {
         let mut built = Vec::with_capacity(clouds.len());
         for pc in clouds {
             let bvh = SphereBvh::build(&pc.points, pc.radius).map_err(|error| CapsuleError { cloud: pc.name.clone(), error })?;
-            let height = || {
-                let (lo, hi) = pc.points.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), p| (lo.min(p.y), hi.max(p.y)));
-                let range = hi - lo;
-                CloudColor::Height { y_min: lo, inv_range: if range > 0.0 { 1.0 / range } else { 0.0 } }
-            };
-            let color = match &pc.coloring {
-                PointColoring::Uniform(c) => CloudColor::Uniform(*c),
-                PointColoring::Height => height(),
-                PointColoring::FileOrHeight if pc.colors.len() == pc.points.len() && !pc.colors.is_empty() => {
-                    CloudColor::File(pc.colors.clone())
-                }
-                PointColoring::FileOrHeight => height(),
-            };
+            let color = PointColors::of(pc);
             built.push(Cloud { bvh, color, specular: pc.specular, shininess: pc.shininess });
         }
         let points = clouds.iter().map(|c| c.points.len() as u64).sum();
@@ -424,7 +384,7 @@ impl PointCloudCapsule {
 
     /// Bytes of the BVHs, sphere centres and colours.
     pub fn bytes(&self) -> usize {
-        self.clouds.iter().map(|c| c.bvh.bytes() + if let CloudColor::File(v) = &c.color { v.len() * 3 } else { 0 }).sum()
+        self.clouds.iter().map(|c| c.bvh.bytes() + if let PointColors::File(v) = &c.color { v.len() * 3 } else { 0 }).sum()
     }
 
     pub fn build_ms(&self) -> f64 {

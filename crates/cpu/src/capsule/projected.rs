@@ -525,7 +525,7 @@ mod tests {
     use super::*;
     use crate::capsule::RayGen;
     use crate::spheres::closest_hit_brute_force;
-    use crate::test_rng::Rng;
+    use hybrid_core::test_rng::Rng;
     use hybrid_scene::Projection;
 
     /// Every pixel whose ray hits a sphere (brute force, the BVH's test) lies in the sphere's

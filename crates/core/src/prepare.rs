@@ -2,9 +2,9 @@
 //! capsule all read this; it also evaluates a material at a point of a triangle, so the G-buffer
 //! (raster) and secondary hits (trace) see exactly the same surface.
 
+use crate::Surface;
+use crate::lanes::{V3, lerp3, normalize_or3, splat3};
 use glam::{Mat3, Vec2, Vec3, Vec4};
-use hybrid_core::Surface;
-use hybrid_core::lanes::{V3, lerp3, normalize_or3, splat3};
 use hybrid_scene::model::normal_matrix;
 use hybrid_scene::{Aabb, ColorSpace, Material, Scene, Texture};
 
@@ -415,6 +415,35 @@ fn bilinear_frac(t: &Texture, uv: Vec2, frac: Vec2, level: usize, decode: Decode
     a.lerp(b, fy)
 }
 
+/// Shadow transparency of a slot whose opacity varies over a texture: evaluated with
+/// `surface_at` at the hit.
+pub const SHADOW_EVALUATE: f32 = -1.0;
+
+/// Shadow-ray transparency of a material: 1 when it casts no shadows, its constant
+/// `1 − opacity` when no texture can change it (no maps, or maps whose relevant channel is the
+/// same in every texel of level 0, the level shadow rays sample), else [`SHADOW_EVALUATE`]. The GPU
+/// backend's BVH uses the same classes.
+pub fn material_shadow(m: &Material, textures: &[Texture]) -> f32 {
+    if !m.casts_shadows || m.opacity <= 0.0 {
+        return 1.0;
+    }
+    if !m.opacity.is_finite() {
+        return SHADOW_EVALUATE;
+    }
+    // The value of texture channel `c` if it is the same everywhere on level 0.
+    let constant = |id: Option<usize>, c: usize| -> Option<f32> {
+        let Some(id) = id else { return Some(1.0) };
+        let t = textures.get(id)?;
+        let texels = &t.levels.first()?.texels;
+        let v = texels.first()?[c];
+        texels.iter().all(|x| x[c] == v).then(|| t.texel(0, 0, 0)[c])
+    };
+    match (constant(m.diffuse_map, 3), constant(m.optical_map, 2)) {
+        (Some(a), Some(b)) => 1.0 - (m.opacity * a * b).clamp(0.0, 1.0),
+        _ => SHADOW_EVALUATE,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -490,11 +519,11 @@ mod tests {
                     b / (b.x + b.y + b.z)
                 });
                 b[1] = Vec3::new(0.5, 0.5, 0.0);
-                let four = ts.plain4(hybrid_core::lanes::soa(b));
+                let four = ts.plain4(crate::lanes::soa(b));
                 for (k, &b) in b.iter().enumerate() {
                     let one = ts.at(b, 0.0);
                     let c = &four.constant;
-                    let lane = |v| hybrid_core::lanes::lane(v, k);
+                    let lane = |v| crate::lanes::lane(v, k);
                     assert_eq!(bits(lane(four.position)), bits(one.position), "{t:?} at {b}");
                     assert_eq!(bits(lane(four.normal)), bits(one.normal), "{t:?} at {b}");
                     assert_eq!(bits(lane(four.diffuse)), bits(one.diffuse), "{t:?} at {b}");
@@ -543,5 +572,25 @@ mod tests {
             let x = (rng.f() - 0.5) * 2f32.powi((rng.f() * 30.0) as i32 - 5);
             assert_eq!(floor(x).to_bits(), x.floor().to_bits(), "floor {x}");
         }
+    }
+
+    #[test]
+    fn shadow_class_of_materials() {
+        let tex = |alphas: [u8; 4]| Texture::new("t", 2, 2, alphas.map(|a| [200, 100, 50, a]).to_vec(), hybrid_scene::ColorSpace::Srgb);
+        let textures = vec![tex([255; 4]), tex([255, 255, 0, 255]), tex([128; 4])];
+        let m = |opacity: f32, diffuse_map: Option<usize>| Material { opacity, diffuse_map, ..Default::default() };
+        assert_eq!(material_shadow(&m(1.0, None), &textures), 0.0);
+        assert_eq!(material_shadow(&m(0.25, None), &textures), 0.75);
+        assert_eq!(material_shadow(&m(1.0, Some(0)), &textures), 0.0);
+        assert_eq!(material_shadow(&m(1.0, Some(1)), &textures), SHADOW_EVALUATE);
+        assert!((material_shadow(&m(1.0, Some(2)), &textures) - (1.0 - 128.0 / 255.0)).abs() < 1e-6);
+        assert_eq!(material_shadow(&m(0.0, Some(1)), &textures), 1.0);
+        assert_eq!(material_shadow(&Material { casts_shadows: false, ..m(1.0, None) }, &textures), 1.0);
+        // A missing texture is evaluated at the hit (where `surface_at` decides).
+        assert_eq!(material_shadow(&m(1.0, Some(9)), &textures), SHADOW_EVALUATE);
+        let optical = Material { optical_map: Some(1), ..m(1.0, None) };
+        // Texture 1's blue channel is constant (50): opacity = 50/255 in sRGB → linear.
+        let tr = material_shadow(&optical, &textures);
+        assert!((tr - (1.0 - textures[1].texel(0, 0, 0).z)).abs() < 1e-6 && tr > 0.5, "{tr}");
     }
 }
