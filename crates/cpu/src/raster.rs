@@ -1159,11 +1159,11 @@ mod tests {
     /// A subpixel coordinate for the fuzz-style tests: half the time exactly on a pixel centre or
     /// pixel corner, to hit the tie cases.
     fn coord(rng: &mut Rng, max_px: i32) -> i32 {
-        let px = (rng.next() % max_px as u64) as i32;
-        match rng.next() % 4 {
+        let px = (rng.next_u64() % max_px as u64) as i32;
+        match rng.next_u64() % 4 {
             0 => px * SUB as i32 + HALF as i32,
             1 => px * SUB as i32,
-            _ => px * SUB as i32 + (rng.next() % SUB as u64) as i32,
+            _ => px * SUB as i32 + (rng.next_u64() % SUB as u64) as i32,
         }
     }
 
@@ -1293,7 +1293,7 @@ mod tests {
             assert_eq!(round_to_i32(x), x.round() as i32, "{x}");
         }
         for _ in 0..200_000 {
-            let x = f32::from_bits(rng.next() as u32);
+            let x = f32::from_bits(rng.next_u64() as u32);
             assert_eq!(round_to_i32(x), x.round() as i32, "{x}");
         }
     }
@@ -1374,7 +1374,7 @@ mod tests {
         let prepared = PreparedScene::new(&scene);
         let (w, h) = (37u32, 5u32);
         let mut rng = Rng(0x0123_4567_89ab_cdef);
-        let mut f = || (rng.next() % 2001) as f32 / 1000.0 - 1.0;
+        let mut f = || (rng.next_u64() % 2001) as f32 / 1000.0 - 1.0;
         for (k, &t) in prepared.triangles.iter().enumerate() {
             let ts = prepared.triangle_surface(t);
             for _ in 0..20 {
@@ -1416,7 +1416,7 @@ mod tests {
     #[test]
     fn four_pixel_barycentrics_match_one_pixel_bit_for_bit() {
         let mut rng = Rng(0x5eed_f0ba_7700);
-        let mut f = || (rng.next() % 4001) as f32 / 1000.0 - 2.0;
+        let mut f = || (rng.next_u64() % 4001) as f32 / 1000.0 - 2.0;
         let special = [0.0, -0.0, 1e-38, -1e30, f32::INFINITY, f32::NAN];
         let (mut valid, mut invalid) = (0, 0);
         for k in 0..4000 {
