@@ -3,7 +3,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use hybrid_core::{Frame, FrameSettings, Mode};
+use hybrid_core::{Frame, FrameSettings, Mode, Stage};
 use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
@@ -62,7 +62,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     let backend = choose_backend(args.backend, args.quiet)?;
     let options = RenderOptions::from(&args.capsule);
     let mut renderer = AnyRenderer::new(&backend, &scene, &file, options)?;
-    let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage))?;
+    let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage.name()))?;
     progress.finish();
 
     write_png_rgba8(&args.output, width, height, &frame.buffers.final_srgb)?;
@@ -139,7 +139,7 @@ impl<'s> AnyRenderer<'s> {
         })
     }
 
-    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Result<Frame, CliError> {
+    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(Stage)) -> Result<Frame, CliError> {
         match self {
             AnyRenderer::Cpu(r) => Ok(r.render(camera, settings, on_stage)),
             AnyRenderer::Gpu(r) => r.render(camera, settings, on_stage).map_err(|e| CliError::failure(e.to_string())),

@@ -12,9 +12,11 @@ pub mod point_colors;
 pub mod prepare;
 pub mod report;
 pub mod shading;
+pub mod stage;
 #[cfg(any(test, feature = "test-support"))]
 pub mod test_rng;
 
 pub use buffers::{FrameBuffers, GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 pub use frame::{Frame, FrameSettings, Mode};
 pub use prepare::PreparedScene;
+pub use stage::Stage;

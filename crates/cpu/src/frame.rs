@@ -7,8 +7,9 @@ use glam::Vec3;
 pub use hybrid_core::Frame;
 use hybrid_core::depth_merge::{PackedRtFrame, unpack_into};
 use hybrid_core::report::{CapsuleReport, FrameReport, RayCounts, StageTimings};
-use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RtLayer};
-use hybrid_heuristic::{Heuristic, HeuristicReport, count_visible_pixels, frame_input, object_inputs, write_mask};
+use hybrid_core::stage::{HeuristicStage, MaskChoice};
+use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RtLayer, Stage};
+use hybrid_heuristic::{Heuristic, HeuristicReport, count_visible_pixels, write_mask};
 use hybrid_scene::{Camera, Scene};
 use rayon::prelude::*;
 
@@ -24,7 +25,7 @@ pub struct CpuRenderer<'s> {
     prepared: PreparedScene<'s>,
     bvh: SceneBvh,
     capsule: Option<PointCloudCapsule>,
-    heuristic: Heuristic,
+    heuristic: HeuristicStage,
     /// Beyond paper 2: trace the capsule after the raster, with rays clipped at the polygon
     /// depth. Saves the rays that would end behind polygons, at the cost of running the
     /// capsule after (not beside) the raster.
@@ -68,7 +69,7 @@ impl<'s> CpuRenderer<'s> {
             prepared,
             bvh,
             capsule,
-            heuristic: Heuristic::new(scene.heuristic.clone()),
+            heuristic: HeuristicStage::new(Heuristic::new(scene.heuristic.clone())),
             clip_capsule_at_raster_depth: false,
             spheres_in_trace: true,
             spare_gbuffer: None,
@@ -82,6 +83,11 @@ impl<'s> CpuRenderer<'s> {
         &self.prepared
     }
 
+    /// The heuristic, e.g. to change its budget or policy between frames (its state carries over).
+    pub fn heuristic_mut(&mut self) -> &mut Heuristic {
+        self.heuristic.heuristic_mut()
+    }
+
     /// Hands a finished frame back so the next frame reuses its memory (G-buffer, lighting,
     /// trace outputs, final image, packed RT frame) instead of allocating and page-faulting it
     /// anew (for loops that render many frames; optional).
@@ -92,7 +98,7 @@ impl<'s> CpuRenderer<'s> {
     }
 
     /// Renders one frame. `on_stage` is told each stage's name as it starts (progress display).
-    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Frame {
+    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(Stage)) -> Frame {
         let frame_start = Instant::now();
         let mut t = StageTimings::default();
         let mode = settings.mode;
@@ -102,48 +108,48 @@ impl<'s> CpuRenderer<'s> {
 
         let (mut gbuffer, primary_rays, rt_packed, capsule_report) = if self.clip_capsule_at_raster_depth {
             // Beyond paper 2: raster first, then the capsule with rays clipped at the polygons.
-            on_stage("raster");
-            let (mut gbuffer, primary_rays) = timed(&mut t.raster, || self.geometry_stage(camera, settings, None));
-            on_stage("capsule");
+            on_stage(Stage::Raster);
+            let (mut gbuffer, primary_rays) = timed(&mut t[Stage::Raster], || self.geometry_stage(camera, settings, None));
+            on_stage(Stage::Capsule);
             let (rt_packed, rt_layer, capsule_report) =
-                timed(&mut t.capsule, || self.capsule_stage(camera, settings, Some(&gbuffer.depth)));
+                timed(&mut t[Stage::Capsule], || self.capsule_stage(camera, settings, Some(&gbuffer.depth)));
             // Block U's depth test, after the fact (counted with the raster, where the
             // unclipped order does it).
             let mut merge_ms = 0.0;
             if let Some(layer) = &rt_layer {
                 timed(&mut merge_ms, || raster::merge_rt_layer(&mut gbuffer, layer, camera));
             }
-            t.raster += merge_ms;
+            t[Stage::Raster] += merge_ms;
             self.spare_rt_layer = rt_layer;
-            timed(&mut t.lighting, || lighting::deferred_lighting_into(&gbuffer, self.scene, camera, &mut buffers.lighting));
+            timed(&mut t[Stage::Lighting], || lighting::deferred_lighting_into(&gbuffer, self.scene, camera, &mut buffers.lighting));
             (gbuffer, primary_rays, rt_packed, capsule_report)
         } else {
             // Paper 2: the capsule's frame first, merged by depth as the polygons are drawn.
-            on_stage("capsule");
-            let (rt_packed, rt_layer, capsule_report) = timed(&mut t.capsule, || self.capsule_stage(camera, settings, None));
-            on_stage("raster");
-            let (gbuffer, primary_rays) = timed(&mut t.raster, || self.geometry_stage(camera, settings, rt_layer.as_ref()));
+            on_stage(Stage::Capsule);
+            let (rt_packed, rt_layer, capsule_report) = timed(&mut t[Stage::Capsule], || self.capsule_stage(camera, settings, None));
+            on_stage(Stage::Raster);
+            let (gbuffer, primary_rays) = timed(&mut t[Stage::Raster], || self.geometry_stage(camera, settings, rt_layer.as_ref()));
             self.spare_rt_layer = rt_layer;
-            timed(&mut t.lighting, || lighting::deferred_lighting_into(&gbuffer, self.scene, camera, &mut buffers.lighting));
+            timed(&mut t[Stage::Lighting], || lighting::deferred_lighting_into(&gbuffer, self.scene, camera, &mut buffers.lighting));
             (gbuffer, primary_rays, rt_packed, capsule_report)
         };
-        t.raster += t.lighting;
+        t[Stage::Raster] += t[Stage::Lighting];
 
-        on_stage("heuristic");
-        let heuristic_report = timed(&mut t.heuristic, || self.heuristic_stage(&mut gbuffer, camera, mode));
+        on_stage(Stage::Heuristic);
+        let heuristic_report = timed(&mut t[Stage::Heuristic], || self.heuristic_stage(&mut gbuffer, camera, mode));
 
-        on_stage("trace");
-        let traced_rays = timed(&mut t.trace, || {
+        on_stage(Stage::Trace);
+        let traced_rays = timed(&mut t[Stage::Trace], || {
             self.trace_stage(&gbuffer, camera, mode, [&mut buffers.shadow, &mut buffers.reflection, &mut buffers.refraction])
         });
 
-        on_stage("blend");
+        on_stage(Stage::Blend);
         let b = &mut buffers;
-        timed(&mut t.blend, || blend::blend_into(&gbuffer, &b.lighting, &b.shadow, &b.reflection, &b.refraction, &mut b.final_srgb));
+        timed(&mut t[Stage::Blend], || {
+            blend::blend_into(&gbuffer, &b.lighting, &b.shadow, &b.reflection, &b.refraction, &mut b.final_srgb)
+        });
 
-        if mode == Mode::Hybrid {
-            self.heuristic.record_trace(heuristic_report.as_ref().map_or(0.0, |r| r.spent), t.trace);
-        }
+        self.heuristic.record_trace(mode, heuristic_report.as_ref(), t[Stage::Trace]);
         t.frame = ms_since(frame_start);
         let rays = RayCounts { primary: primary_rays, ..traced_rays };
         let report = FrameReport {
@@ -224,28 +230,23 @@ impl<'s> CpuRenderer<'s> {
         }
     }
 
-    /// Stage 2: A per object from the object-id target (one pass), the heuristic's selection,
-    /// and the mask. `all` selects every visible object; `rt-only` traces every covered pixel;
-    /// `raster` traces nothing.
+    /// Stage 2: the shared heuristic stage on A per object from the object-id target (one pass),
+    /// then the mask. `all` selects every visible object; `rt-only` traces every covered pixel;
+    /// `raster` traces nothing (the raster left the mask at 0).
     fn heuristic_stage(&mut self, gbuffer: &mut GBuffer, camera: &Camera, mode: Mode) -> Option<HeuristicReport> {
-        match mode {
-            Mode::Raster => None,
-            Mode::RtOnly => {
+        let object_count = self.scene.objects.len();
+        let count = || Ok::<_, std::convert::Infallible>(count_visible_pixels(&gbuffer.object_id, object_count));
+        let Ok(choice) = self.heuristic.choose(&self.prepared, camera, (gbuffer.width, gbuffer.height), mode, count);
+        match &choice {
+            MaskChoice::Nothing => {}
+            MaskChoice::AllCovered => {
                 for (m, &id) in gbuffer.mask.iter_mut().zip(&gbuffer.object_id) {
                     *m = if id != NO_OBJECT { 1.0 } else { 0.0 };
                 }
-                None
             }
-            Mode::Hybrid | Mode::All => {
-                let areas = count_visible_pixels(&gbuffer.object_id, self.scene.objects.len());
-                let objects = object_inputs(self.scene, &self.prepared.object_bounds, &areas);
-                let frame = frame_input(self.scene, camera, gbuffer.width, gbuffer.height);
-                let selection =
-                    if mode == Mode::All { self.heuristic.run_unlimited(&objects, &frame) } else { self.heuristic.run(&objects, &frame) };
-                write_mask(&gbuffer.object_id, &selection.selected, &mut gbuffer.mask);
-                Some(selection.report)
-            }
+            MaskChoice::Objects(selection) => write_mask(&gbuffer.object_id, &selection.selected, &mut gbuffer.mask),
         }
+        choice.into_report()
     }
 
     /// Stage 3: shadow, reflection and refraction rays for masked pixels (listings 8a–d), into

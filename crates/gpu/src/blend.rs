@@ -6,7 +6,8 @@
 use crate::context::GpuContext;
 use crate::heuristic::compute_pipeline;
 use crate::targets::{FINAL_FORMAT, FrameTargets};
-use crate::timing::{Stage, StageTimer};
+use crate::timing::StageTimer;
+use hybrid_core::Stage;
 
 pub(crate) const BLEND_WGSL: &str = include_str!("shaders/blend.wgsl");
 

@@ -20,7 +20,8 @@ use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::spheres::{SPHERES_WGSL, SpheresGpu};
 use crate::targets::{FrameTargets, PACKED_FORMAT, begin_gbuffer_pass, gbuffer_pipeline};
-use crate::timing::{Stage, StageTimer};
+use crate::timing::StageTimer;
+use hybrid_core::Stage;
 
 /// The capsule pass's WGSL (after common.wgsl and spheres.wgsl).
 pub const CAPSULE_WGSL: &str = include_str!("shaders/capsule.wgsl");

@@ -6,10 +6,10 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use hybrid_core::PreparedScene;
 use hybrid_core::report::{AdapterReport, FrameReport, RayCounts, StageTimings};
-use hybrid_core::{Frame, FrameSettings, Mode};
-use hybrid_heuristic::{Heuristic, HeuristicReport, frame_input, object_inputs};
+use hybrid_core::stage::{HeuristicStage, MaskChoice};
+use hybrid_core::{Frame, FrameSettings, Mode, PreparedScene, Stage};
+use hybrid_heuristic::{Heuristic, HeuristicReport};
 use hybrid_scene::{Camera, Scene};
 
 use crate::blend::BlendPass;
@@ -43,7 +43,7 @@ pub struct GpuRenderer<'s> {
     /// The trace stage bound to no spheres (`spheres_in_trace = false`; scenes with point clouds).
     trace_without_spheres: Option<TracePasses>,
     blend: BlendPass,
-    heuristic: Heuristic,
+    heuristic: HeuristicStage,
     targets: Option<FrameTargets>,
     timer: StageTimer,
     /// Host milliseconds spent building and uploading the scene (BVHs included).
@@ -87,7 +87,7 @@ impl<'s> GpuRenderer<'s> {
             heuristic_passes: HeuristicPasses::new(&ctx, scene.objects.len() as u32),
             blend: BlendPass::new(&ctx),
             timer: StageTimer::new(&ctx),
-            heuristic: Heuristic::new(scene.heuristic.clone()),
+            heuristic: HeuristicStage::new(Heuristic::new(scene.heuristic.clone())),
             targets: None,
             prepare_ms: start.elapsed().as_secs_f64() * 1e3,
             spheres_in_trace: true,
@@ -111,9 +111,14 @@ impl<'s> GpuRenderer<'s> {
         &self.prepared
     }
 
+    /// The heuristic, e.g. to change its budget or policy between frames (its state carries over).
+    pub fn heuristic_mut(&mut self) -> &mut Heuristic {
+        self.heuristic.heuristic_mut()
+    }
+
     /// Renders one frame and reads every buffer back (for the image, dumps and tests).
     /// `on_stage` is told each stage's name as it is recorded.
-    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Result<Frame, GpuError> {
+    pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(Stage)) -> Result<Frame, GpuError> {
         let (w, h) = (settings.width, settings.height);
         let scope = ErrorScope::push(&self.ctx.device);
         let targets = match self.targets.take() {
@@ -143,7 +148,7 @@ impl<'s> GpuRenderer<'s> {
         targets: &FrameTargets,
         camera: &Camera,
         settings: FrameSettings,
-        on_stage: &mut dyn FnMut(&str),
+        on_stage: &mut dyn FnMut(Stage),
     ) -> Result<(FrameReport, f64), GpuError> {
         let start = Instant::now();
         let (w, h, mode) = (settings.width, settings.height, settings.mode);
@@ -158,19 +163,19 @@ impl<'s> GpuRenderer<'s> {
         if clip {
             // Beyond paper 2: polygons first, then the capsule's rays stop at their depth and its
             // frame is merged into theirs.
-            on_stage("raster");
+            on_stage(Stage::Raster);
             self.geometry_stage(&mut enc, targets, mode, true);
-            on_stage("capsule");
+            on_stage(Stage::Capsule);
             self.capsule_stage(&mut enc, targets, true);
         } else {
             // Paper 2: the capsule's frame first, the polygons depth-tested against it.
-            on_stage("capsule");
+            on_stage(Stage::Capsule);
             self.capsule_stage(&mut enc, targets, false);
-            on_stage("raster");
+            on_stage(Stage::Raster);
             self.geometry_stage(&mut enc, targets, mode, self.capsule.is_none());
         }
         self.lighting.encode(&mut enc, &self.gpu_scene, targets, &mut self.timer);
-        on_stage("heuristic");
+        on_stage(Stage::Heuristic);
         let counting = matches!(mode, Mode::Hybrid | Mode::All);
         if counting {
             self.heuristic_passes.encode_count(&mut enc, targets, &mut self.timer);
@@ -186,7 +191,7 @@ impl<'s> GpuRenderer<'s> {
         let heuristic_report = self.heuristic_stage(&mut enc, targets, camera, mode)?;
         let heuristic_host_ms = heuristic_start.elapsed().as_secs_f64() * 1e3;
 
-        on_stage("trace");
+        on_stage(Stage::Trace);
         if mode == Mode::Raster {
             clear_trace_outputs(&mut enc, targets);
         } else {
@@ -197,7 +202,7 @@ impl<'s> GpuRenderer<'s> {
                 &mut self.timer,
             );
         }
-        on_stage("blend");
+        on_stage(Stage::Blend);
         self.blend.encode(&mut enc, targets, &mut self.timer);
         self.timer.resolve(&mut enc);
         let second = Instant::now();
@@ -220,9 +225,7 @@ impl<'s> GpuRenderer<'s> {
         // entry is its host part (read-back, selection) plus its GPU passes.
         let mut timings = gpu_timings.unwrap_or(StageTimings { trace: second_ms, ..Default::default() });
         timings.heuristic += heuristic_host_ms;
-        if mode == Mode::Hybrid {
-            self.heuristic.record_trace(heuristic_report.as_ref().map_or(0.0, |r| r.spent), timings.trace);
-        }
+        self.heuristic.record_trace(mode, heuristic_report.as_ref(), timings[Stage::Trace]);
         let capsule = self.capsule.as_ref().map(|c| {
             let mut r = c.report();
             r.trace_ms = gpu_timings.map_or(0.0, |g| g.capsule);
@@ -269,8 +272,8 @@ impl<'s> GpuRenderer<'s> {
         }
     }
 
-    /// Stage 2: read A per object back, run the shared heuristic (modes hybrid and all), and
-    /// record the mask pass. rt-only masks every covered pixel; raster masks nothing.
+    /// Stage 2: the shared heuristic stage on A per object read back from the count pass (modes
+    /// hybrid and all), then the mask pass. rt-only masks every covered pixel; raster masks nothing.
     fn heuristic_stage(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
@@ -279,25 +282,15 @@ impl<'s> GpuRenderer<'s> {
         mode: Mode,
     ) -> Result<Option<HeuristicReport>, GpuError> {
         let ctx = &self.ctx;
-        match mode {
-            Mode::Raster => {
-                self.heuristic_passes.encode_mask(ctx, enc, targets, MaskSelection::Nothing, &mut self.timer);
-                Ok(None)
-            }
-            Mode::RtOnly => {
-                self.heuristic_passes.encode_mask(ctx, enc, targets, MaskSelection::AllCovered, &mut self.timer);
-                Ok(None)
-            }
-            Mode::Hybrid | Mode::All => {
-                let areas = self.heuristic_passes.read_counts(ctx)?;
-                let objects = object_inputs(self.scene, &self.prepared.object_bounds, &areas);
-                let frame = frame_input(self.scene, camera, targets.width, targets.height);
-                let selection =
-                    if mode == Mode::All { self.heuristic.run_unlimited(&objects, &frame) } else { self.heuristic.run(&objects, &frame) };
-                self.heuristic_passes.encode_mask(ctx, enc, targets, MaskSelection::Objects(&selection.selected), &mut self.timer);
-                Ok(Some(selection.report))
-            }
-        }
+        let passes = &self.heuristic_passes;
+        let choice = self.heuristic.choose(&self.prepared, camera, (targets.width, targets.height), mode, || passes.read_counts(ctx))?;
+        let mask = match &choice {
+            MaskChoice::Nothing => MaskSelection::Nothing,
+            MaskChoice::AllCovered => MaskSelection::AllCovered,
+            MaskChoice::Objects(selection) => MaskSelection::Objects(&selection.selected),
+        };
+        self.heuristic_passes.encode_mask(ctx, enc, targets, mask, &mut self.timer);
+        Ok(choice.into_report())
     }
 }
 

@@ -10,7 +10,8 @@ use wgpu::util::DeviceExt;
 use crate::context::{GpuContext, GpuError};
 use crate::readback::read_buffer;
 use crate::targets::{FrameTargets, MASK_FORMAT};
-use crate::timing::{Stage, StageTimer};
+use crate::timing::StageTimer;
+use hybrid_core::Stage;
 
 /// Which pixels the mask marks for tracing (DESIGN §1 modes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

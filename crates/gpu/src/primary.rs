@@ -10,7 +10,8 @@ use crate::context::GpuContext;
 use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
-use crate::timing::{Stage, StageTimer};
+use crate::timing::StageTimer;
+use hybrid_core::Stage;
 
 /// The pass's own WGSL (after common.wgsl and bvh.wgsl).
 pub const PRIMARY_WGSL: &str = include_str!("shaders/primary.wgsl");

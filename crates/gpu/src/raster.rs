@@ -12,7 +12,8 @@ use crate::context::GpuContext;
 use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
-use crate::timing::{Stage, StageTimer};
+use crate::timing::StageTimer;
+use hybrid_core::Stage;
 
 /// WGSL of the pass (common.wgsl is prepended).
 pub const SOURCE: &str = include_str!("shaders/raster.wgsl");

@@ -2,21 +2,11 @@
 //! and end of each pass, never inside one: lavapipe gets those wrong). A stage's time runs from
 //! the start of its first pass to the end of its last.
 
+use hybrid_core::Stage;
 use hybrid_core::report::StageTimings;
 
 use crate::context::{GpuContext, GpuError};
 use crate::readback::read_buffer;
-
-/// The frame's stages, as `StageTimings` names them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Stage {
-    Capsule,
-    Raster,
-    Lighting,
-    Heuristic,
-    Trace,
-    Blend,
-}
 
 /// Most passes one frame may time (two queries each).
 const MAX_PASSES: u32 = 32;

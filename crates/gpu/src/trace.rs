@@ -19,7 +19,8 @@ use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::spheres::{SPHERES_WGSL, SpheresGpu};
 use crate::targets::{COLOR_FORMAT, FrameTargets};
-use crate::timing::{Stage, StageTimer};
+use crate::timing::StageTimer;
+use hybrid_core::Stage;
 
 /// The pass's own WGSL (after common.wgsl, bvh.wgsl and spheres.wgsl).
 pub const TRACE_WGSL: &str = include_str!("shaders/trace.wgsl");
