@@ -1,4 +1,4 @@
-//! Command-line arguments (DESIGN §7). Flag names are a contract: keep them.
+//! Command-line arguments (design §7). Flag names are a contract: keep them.
 
 use std::path::PathBuf;
 

@@ -1,4 +1,4 @@
-//! The frame's buffers (DESIGN §2, paper Table 2), as plain row-major arrays (row 0 at the top).
+//! The frame's buffers (design §2, paper Table 2), as plain row-major arrays (row 0 at the top).
 //! The CPU backend writes them directly; the GPU backend reads its textures back into them for
 //! dumps and tests, so both are compared buffer by buffer.
 
@@ -29,7 +29,7 @@ pub struct Surface {
     pub ior: f32,
 }
 
-/// The G-buffer of DESIGN §2: one entry per pixel in every target.
+/// The G-buffer of design §2: one entry per pixel in every target.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GBuffer {
     pub width: u32,

@@ -1,4 +1,4 @@
-//! Paper 2 (DESIGN §5): the depth merge of a ray-traced RT-scene into the raster frame.
+//! Paper 2 (design §5): the depth merge of a ray-traced RT-scene into the raster frame.
 //!
 //! - Block D ([`synthesize_depth`], [`synthesize_depth_orthographic`]): the reversed-Z window depth
 //!   the rasterizer would write for the point at parameter `t` along a pixel's primary ray.
@@ -174,7 +174,7 @@ pub fn view_z_from_depth_orthographic(z_w: f32, near: f32, far: f32) -> f32 {
     z_w * (far - near) - far
 }
 
-/// What one capsule frame cost (DESIGN §5; written to the frame report).
+/// What one capsule frame cost (design §5; written to the frame report).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct CapsuleStats {
     /// Spheres in the RT-scene.

@@ -1,4 +1,4 @@
-//! Frame modes, per-frame settings and what a frame produces (DESIGN §1).
+//! Frame modes, per-frame settings and what a frame produces (design §1).
 
 use std::fmt;
 use std::str::FromStr;
@@ -9,7 +9,7 @@ use crate::buffers::{FrameBuffers, GBuffer};
 use crate::depth_merge::PackedRtFrame;
 use crate::report::FrameReport;
 
-/// Which stages run (DESIGN §1).
+/// Which stages run (design §1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Mode {

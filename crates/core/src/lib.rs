@@ -1,5 +1,5 @@
 //! `hybrid-core`: what every backend shares — the frame's modes and settings, the buffers of
-//! DESIGN §2, the shading and blend formulas of paper 1 (listings 5, 8, 10), the depth synthesis
+//! design §2, the shading and blend formulas of paper 1 (listings 5, 8, 10), the depth synthesis
 //! and packing of paper 2, and the per-frame report. Backends implement the stages; the maths
 //! they must agree on lives here, once.
 

@@ -5,7 +5,7 @@ use serde::Serialize;
 
 use crate::frame::Mode;
 
-/// Wall-clock milliseconds per stage (DESIGN §1). `frame` is the whole frame.
+/// Wall-clock milliseconds per stage (design §1). `frame` is the whole frame.
 #[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
 pub struct StageTimings {
     /// Stage 0: the RT-scene capsule (trace + pack) and its unpack; 0 without point clouds.

@@ -1,4 +1,4 @@
-//! `bvh`: the scene's triangle BVH for the trace stage (DESIGN §1, "PreparedScene … BVHs").
+//! `bvh`: the scene's triangle BVH for the trace stage (design §1, "PreparedScene … BVHs").
 //!
 //! Our own BVH rather than obvhs: a binned-SAH binary build (16 bins on all three axes; large
 //! nodes are binned in parallel, and the upper levels split in parallel with `rayon::join`),

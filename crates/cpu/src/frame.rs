@@ -1,4 +1,4 @@
-//! The CPU frame: DESIGN §1's stages called in order. `CpuRenderer::render` is the whole frame
+//! The CPU frame: design §1's stages called in order. `CpuRenderer::render` is the whole frame
 //! on one screen; each stage lives in its own module with explicit inputs and outputs.
 
 use std::time::Instant;

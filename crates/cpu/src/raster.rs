@@ -601,23 +601,8 @@ fn walk_rows(t: &RasterTri, rows: std::ops::Range<u32>, mut row: impl FnMut(u32,
     }
 }
 
-/// Calls `hit(x, y, covered)` for every pixel centre of the bounding box of `t` in rows `rows`;
-/// `covered` by the top-left rule. (Every box pixel, so callers can update branch-free.)
-#[inline]
-#[cfg_attr(not(test), allow(dead_code))]
-fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnMut(u32, u32, bool)) {
-    walk_rows(t, rows, |y, [mut e0, mut e1, mut e2], step| {
-        for x in t.x0..=t.x1 {
-            hit(x, y, (e0 | e1 | e2) >= 0);
-            e0 += step[0];
-            e1 += step[1];
-            e2 += step[2];
-        }
-    });
-}
-
 /// Depth test of `t` (visibility id `id`) against a band's visibility buffer (`depth`, `ids`:
-/// rows `y_lo..y_hi`, `w` pixels each): covered pixels (as [`for_each_covered`]) where the
+/// rows `y_lo..y_hi`, `w` pixels each): covered pixels (by the top-left rule) where the
 /// triangle's depth is Greater take its depth and id.
 #[inline]
 fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mut [f32], ids: &mut [u32]) {
@@ -1139,6 +1124,19 @@ fn shade(st: &ShadeTri, ts: &TriangleSurface<'_>, x: u32, y: u32) -> Surface {
 mod tests {
     use super::*;
     use hybrid_core::test_rng::Rng;
+
+    /// The tests' oracle of coverage: calls `hit(x, y, covered)` for every pixel centre of the
+    /// bounding box of `t` in rows `rows`, `covered` by the top-left rule.
+    fn for_each_covered(t: &RasterTri, rows: std::ops::Range<u32>, mut hit: impl FnMut(u32, u32, bool)) {
+        walk_rows(t, rows, |y, [mut e0, mut e1, mut e2], step| {
+            for x in t.x0..=t.x1 {
+                hit(x, y, (e0 | e1 | e2) >= 0);
+                e0 += step[0];
+                e1 += step[1];
+                e2 += step[2];
+            }
+        });
+    }
 
     fn vpt(w: u32, h: u32) -> Viewport {
         Viewport { vp: Mat4::IDENTITY, width: w, height: h, gx: 1.0 + 2.0 * GUARD_PX / w as f32, gy: 1.0 + 2.0 * GUARD_PX / h as f32 }

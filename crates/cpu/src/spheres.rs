@@ -1,4 +1,4 @@
-//! A BVH over millions of equal-radius spheres (the RT-scene's point cloud, DESIGN §5).
+//! A BVH over millions of equal-radius spheres (the RT-scene's point cloud, design §5).
 //!
 //! - **Build**: binned SAH (16 bins along the widest axis) over the sphere centres. With one
 //!   radius, a node's box is its centres' box grown by `r`, so the bins track centre bounds only.

@@ -1,4 +1,4 @@
-//! `trace`: the ray-tracing stage of paper 1 (§3.3, listings 8a–d; DESIGN §3), and the primary
+//! `trace`: the ray-tracing stage of paper 1 (§3.3, listings 8a–d; design §3), and the primary
 //! rays of the `rt-only` mode.
 //!
 //! Per masked pixel (listing 8a) it writes the shadow buffer (1 minus the Blinn–Phong light that

@@ -1,18 +1,19 @@
-//! The RT-scene capsule and the depth merge's blocks D, P, U (paper 2, DESIGN §5).
+//! The RT-scene capsule and the depth merge's blocks D, P, U (paper 2, design §5).
 
 use glam::{DMat4, DVec3, DVec4, Vec3};
 use hybrid_core::depth_merge::{
     PackedRtFrame, alpha_kept, decode_texel, encode_hit, pack_texel, pack_unorm4x8, unpack, unpack_texel, unpack_unorm4x8,
 };
-use hybrid_cpu::capsule::{
-    CapsuleRequest, ExchangeError, ExchangeState, FrameExchange, OwnedCapsuleRequest, PointCloudCapsule, PrimaryVisibility, RayGen,
-    RtCapsule, render_sync,
-};
+use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RayGen, RtCapsule, render_sync};
 use hybrid_cpu::spheres::{SphereBvh, closest_hit_brute_force};
 use hybrid_scene::texture::linear_to_srgb;
 use hybrid_scene::{Camera, DirectionalLight, Environment, Lights, PointCloud, PointColoring, Projection};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+
+#[path = "support/exchange.rs"]
+mod exchange;
+use exchange::{ExchangeError, ExchangeState, FrameExchange, OwnedCapsuleRequest};
 
 const TREE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/assets/tree-pointcloud/rtls_pc_tree.ply");
 

@@ -1,13 +1,14 @@
-//! Stage 4, `blend` (paper listing 10, eq. 4–6; DESIGN §3), on the GPU: one compute pass from
+//! Stage 4, `blend` (paper listing 10, eq. 4–6; design §3), on the GPU: one compute pass from
 //! lighting, shadow, reflection, refraction, the G-buffer's optical target and the mask to the
 //! final 8-bit sRGB image, byte for byte as `hybrid_core::blend::{blend_pixel, encode_srgb}`
 //! (the shader rounds to the byte itself; the Rgba8Unorm store keeps it).
+
+use hybrid_core::Stage;
 
 use crate::context::GpuContext;
 use crate::heuristic::compute_pipeline;
 use crate::targets::{FINAL_FORMAT, FrameTargets};
 use crate::timing::StageTimer;
-use hybrid_core::Stage;
 
 pub(crate) const BLEND_WGSL: &str = include_str!("shaders/blend.wgsl");
 

@@ -1,4 +1,4 @@
-//! `capsule`: paper 2 on the GPU (DESIGN §5). Stage 0 is one compute pass (`capsule.wgsl`, 8×8
+//! `capsule`: paper 2 on the GPU (design §5). Stage 0 is one compute pass (`capsule.wgsl`, 8×8
 //! workgroups): per pixel the CPU capsule's primary ray (`hybrid_cpu::capsule::RayGen`, bit for
 //! bit from the frame uniforms' `raygen_*`), the closest sphere (`spheres.wgsl`), Blinn–Phong with
 //! the scene's lights and ambient, block D and block P into `targets.packed` (RGBA16UI). Block U
@@ -6,12 +6,13 @@
 //! texel's surface and depth; the raster pass then depth-tests its polygons against it.
 //!
 //! Beyond the CPU capsule's options: `clip_depth` (rays stopping at the raster's depth) is not
-//! used, since the frame runs the capsule before the raster pass (DESIGN §1 order), so there is no
+//! used, since the frame runs the capsule before the raster pass (design §1 order), so there is no
 //! polygon depth yet when the capsule traces.
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use hybrid_core::Stage;
 use hybrid_core::report::CapsuleReport;
 
 use crate::context::{GpuContext, GpuError};
@@ -21,7 +22,6 @@ use crate::shaders;
 use crate::spheres::{SPHERES_WGSL, SpheresGpu};
 use crate::targets::{FrameTargets, PACKED_FORMAT, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::StageTimer;
-use hybrid_core::Stage;
 
 /// The capsule pass's WGSL (after common.wgsl and spheres.wgsl).
 pub const CAPSULE_WGSL: &str = include_str!("shaders/capsule.wgsl");

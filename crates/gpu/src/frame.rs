@@ -1,4 +1,4 @@
-//! The GPU frame: DESIGN §1's stages as GPU passes, called in the same order as the CPU frame
+//! The GPU frame: design §1's stages as GPU passes, called in the same order as the CPU frame
 //! (`hybrid_cpu::frame`). `GpuRenderer::render` is the whole frame on one screen; each stage is
 //! its own module with explicit inputs (the scene's group 0, the frame's targets) and outputs
 //! (targets it writes). One read-back sits in the middle: the heuristic's pixel counts.
@@ -78,8 +78,11 @@ impl<'s> GpuRenderer<'s> {
         let capsule = (!scene.point_clouds.is_empty()).then(|| GpuCapsule::new(&ctx, &gpu_scene, &spheres));
         let no_spheres = SpheresGpu::empty(&ctx);
         let trace = TracePasses::new(&ctx, &gpu_scene, &prepared, &spheres)?;
-        let trace_without_spheres =
-            if scene.point_clouds.is_empty() { None } else { Some(TracePasses::new(&ctx, &gpu_scene, &prepared, &no_spheres)?) };
+        let trace_without_spheres = if scene.point_clouds.is_empty() {
+            None
+        } else {
+            Some(TracePasses::with_bvh(&ctx, &gpu_scene, &prepared, trace.shared_bvh(), &no_spheres)?)
+        };
         Ok(Self {
             raster: RasterPass::new(&ctx, &gpu_scene),
             primary: PrimaryPass::new(&ctx, &gpu_scene, trace.bvh()),

@@ -1,19 +1,19 @@
-//! Stage 2, `heuristic` (DESIGN §4), on the GPU: a compute pass counts A (pixels per object id,
+//! Stage 2, `heuristic` (design §4), on the GPU: a compute pass counts A (pixels per object id,
 //! atomics) → a small read-back → the shared heuristic code on the CPU (`hybrid_heuristic`, as
 //! the CPU backend runs it) → the selected flags go back up → a compute pass writes the mask.
 //!
 //! wgpu's occlusion queries are boolean only, so they cannot give A: the object-id target does
-//! (DESIGN §2), for all objects in one pass.
+//! (design §2), for all objects in one pass.
 
+use hybrid_core::Stage;
 use wgpu::util::DeviceExt;
 
 use crate::context::{GpuContext, GpuError};
 use crate::readback::read_buffer;
 use crate::targets::{FrameTargets, MASK_FORMAT};
 use crate::timing::StageTimer;
-use hybrid_core::Stage;
 
-/// Which pixels the mask marks for tracing (DESIGN §1 modes).
+/// Which pixels the mask marks for tracing (design §1 modes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MaskSelection<'a> {
     /// `hybrid` / `all`: 1 where the pixel's object is selected (`selected[id]`), as

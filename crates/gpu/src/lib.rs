@@ -1,4 +1,4 @@
-//! `hybrid-gpu`: the wgpu backend (DESIGN §1). The same stages as `hybrid-cpu`, as GPU passes
+//! `hybrid-gpu`: the wgpu backend (design §1). The same stages as `hybrid-cpu`, as GPU passes
 //! (WGSL beside the Rust in `src/shaders/`), headless on any wgpu adapter (Vulkan, Metal, DX12,
 //! GL; Mesa's lavapipe in CI). The CPU backend is its oracle in tests.
 

@@ -4,12 +4,13 @@
 //! stage's) from the G-buffer, every other pixel the sky along its primary ray. Output:
 //! `targets.lighting` (Rgba16Float, linear).
 
+use hybrid_core::Stage;
+
 use crate::context::GpuContext;
 use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::targets::{COLOR_FORMAT, FrameTargets};
 use crate::timing::StageTimer;
-use hybrid_core::Stage;
 
 /// WGSL of the pass (common.wgsl is prepended).
 pub const SOURCE: &str = include_str!("shaders/lighting.wgsl");

@@ -5,13 +5,14 @@
 //! frame's view-projection, reversed-Z, depth-tested Greater so an RT-scene layer already in the
 //! depth buffer is merged as the raster would); misses are discarded.
 
+use hybrid_core::Stage;
+
 use crate::bvh::{BVH_WGSL, TriangleBvhGpu};
 use crate::context::GpuContext;
 use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::StageTimer;
-use hybrid_core::Stage;
 
 /// The pass's own WGSL (after common.wgsl and bvh.wgsl).
 pub const PRIMARY_WGSL: &str = include_str!("shaders/primary.wgsl");

@@ -8,12 +8,13 @@
 //! ([`GBUFFER_COLOR_FORMATS`]) and reversed-Z depth (Greater, write on). No face culling: the
 //! CPU rasteriser draws both sides too.
 
+use hybrid_core::Stage;
+
 use crate::context::GpuContext;
 use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::StageTimer;
-use hybrid_core::Stage;
 
 /// WGSL of the pass (common.wgsl is prepended).
 pub const SOURCE: &str = include_str!("shaders/raster.wgsl");

@@ -95,7 +95,7 @@ fn rgb(v: Vec<Vec4>) -> Vec<Vec3> {
     v.into_iter().map(Vec4::truncate).collect()
 }
 
-/// The whole G-buffer (DESIGN §2) as the CPU backend's type.
+/// The whole G-buffer (design §2) as the CPU backend's type.
 pub fn read_gbuffer(ctx: &GpuContext, t: &FrameTargets) -> Result<GBuffer, GpuError> {
     Ok(GBuffer {
         width: t.width,

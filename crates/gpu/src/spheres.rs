@@ -1,4 +1,4 @@
-//! `spheres`: the RT-scene's spheres on the GPU (paper 2, DESIGN §5) as bind group 2: every
+//! `spheres`: the RT-scene's spheres on the GPU (paper 2, design §5) as bind group 2: every
 //! point of every point cloud as a sphere of its cloud's radius, coloured by the rule both
 //! backends share (`hybrid_core::point_colors`: file colours, the cloud's colour or the height
 //! colour map, evaluated on the host, so albedos are bit-identical), under an obvhs BVH2 built on the CPU over

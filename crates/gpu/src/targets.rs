@@ -1,7 +1,7 @@
-//! `targets`: the frame's GPU textures, one per buffer of DESIGN §2 (paper Table 2), made once
+//! `targets`: the frame's GPU textures, one per buffer of design §2 (paper Table 2), made once
 //! per frame size and reused frame after frame.
 
-/// G-buffer target formats (DESIGN §2).
+/// G-buffer target formats (design §2).
 pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 /// Normal, emission, ambient, diffuse+opacity, specular+shininess, optical, and the lighting,
 /// shadow, reflection and refraction buffers.
@@ -58,7 +58,7 @@ impl Target {
     }
 }
 
-/// Every texture of one frame (DESIGN §2), for one size.
+/// Every texture of one frame (design §2), for one size.
 pub struct FrameTargets {
     pub width: u32,
     pub height: u32,

@@ -1,4 +1,4 @@
-//! `trace`: stage 3 on the GPU (paper 1 listings 8a–d, DESIGN §3), the twin of hybrid-cpu's
+//! `trace`: stage 3 on the GPU (paper 1 listings 8a–d, design §3), the twin of hybrid-cpu's
 //! `trace.rs`: three compute passes (shadow, reflection, refraction) over the masked pixels of
 //! the G-buffer, each writing its buffer (shadow 1, reflection and refraction 0 where nothing is
 //! traced), with rays traversing the triangle BVH of [`crate::bvh`]. `shaders/trace.wgsl` turns
@@ -7,8 +7,11 @@
 //! ([`crate::spheres`], group 2) are geometry too, as in the CPU's `trace_with_spheres`: opaque
 //! shadow casters, and seen (shaded as the capsule shades them) by secondary rays.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 use hybrid_core::PreparedScene;
+use hybrid_core::Stage;
 use hybrid_core::report::RayCounts;
 use wgpu::util::DeviceExt;
 
@@ -20,7 +23,6 @@ use crate::shaders;
 use crate::spheres::{SPHERES_WGSL, SpheresGpu};
 use crate::targets::{COLOR_FORMAT, FrameTargets};
 use crate::timing::StageTimer;
-use hybrid_core::Stage;
 
 /// The pass's own WGSL (after common.wgsl, bvh.wgsl and spheres.wgsl).
 pub const TRACE_WGSL: &str = include_str!("shaders/trace.wgsl");
@@ -43,7 +45,8 @@ struct TraceParams {
 pub struct TracePasses {
     device: wgpu::Device,
     spheres: wgpu::BindGroup,
-    bvh: TriangleBvhGpu,
+    /// Shared with the frame's other trace passes (with/without spheres) and the primary pass.
+    bvh: Arc<TriangleBvhGpu>,
     layout: wgpu::BindGroupLayout,
     shadow: wgpu::ComputePipeline,
     reflection: wgpu::ComputePipeline,
@@ -58,8 +61,20 @@ const WORKGROUP: u32 = 8;
 impl TracePasses {
     /// `spheres`: the RT-scene's spheres (`SpheresGpu::empty` when the scene has no point clouds).
     pub fn new(ctx: &GpuContext, scene: &SceneGpu, prepared: &PreparedScene, spheres: &SpheresGpu) -> Result<Self, GpuError> {
+        let bvh = Arc::new(TriangleBvhGpu::new(ctx, scene, prepared)?);
+        Self::with_bvh(ctx, scene, prepared, bvh, spheres)
+    }
+
+    /// As [`TracePasses::new`], on a triangle BVH already built and uploaded (one BVH serves the
+    /// trace stage with and without the spheres).
+    pub fn with_bvh(
+        ctx: &GpuContext,
+        scene: &SceneGpu,
+        prepared: &PreparedScene,
+        bvh: Arc<TriangleBvhGpu>,
+        spheres: &SpheresGpu,
+    ) -> Result<Self, GpuError> {
         let device = &ctx.device;
-        let bvh = TriangleBvhGpu::new(ctx, scene, prepared)?;
         let settings = &prepared.scene.trace;
         let params = TraceParams {
             ray_bias: settings.ray_bias,
@@ -161,6 +176,11 @@ impl TracePasses {
     /// The BVH the passes traverse (the rt-only primary pass shares it).
     pub fn bvh(&self) -> &TriangleBvhGpu {
         &self.bvh
+    }
+
+    /// The triangle BVH, to share with another [`TracePasses::with_bvh`].
+    pub fn shared_bvh(&self) -> Arc<TriangleBvhGpu> {
+        self.bvh.clone()
     }
 
     /// Stage 3: the shadow, reflection and refraction passes over `targets` (reads the G-buffer

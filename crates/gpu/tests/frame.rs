@@ -101,7 +101,7 @@ fn dining_room_matches_the_cpu() {
 /// The pavilion's refraction (and so the final image) is looser: its pool water is refracted
 /// onto surfaces where coplanar faces tie, and the tie flips with any perturbation. Measured at
 /// 96×54: refraction 0.024, final 0.029; the CPU's own trace of the CPU G-buffer with only the
-/// optical target replaced by the GPU's (IOR 1.33 stored as f16 = 1.3300781, DESIGN §2's
+/// optical target replaced by the GPU's (IOR 1.33 stored as f16 = 1.3300781, design §2's
 /// Rgba16Float) differs from the CPU frame by the same 0.023, while the GPU trace of the CPU's
 /// G-buffer stays at 0.006: the difference is the format's IOR rounding, not the GPU stages.
 #[test]

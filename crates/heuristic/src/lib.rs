@@ -1,7 +1,7 @@
 //! # hybrid-heuristic
 //!
 //! The per-object selection heuristic of Walewski et al. 2019 (§3.2, eq. 1–3, Table 3,
-//! listing 6; DESIGN §4): under a budget, which visible objects get ray-traced shadows,
+//! listing 6; design §4): under a budget, which visible objects get ray-traced shadows,
 //! reflections and refractions this frame. Backend-free: the CPU and GPU backends hand it the
 //! G-buffer's object-id target and a few numbers per object, and get back a selection and the
 //! mask the trace stage reads.
@@ -104,7 +104,7 @@ pub struct Selection {
     pub report: HeuristicReport,
 }
 
-/// Why the heuristic chose what it chose this frame (JSON keys as in DESIGN §4).
+/// Why the heuristic chose what it chose this frame (JSON keys as in design §4).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct HeuristicReport {
     /// `"paper"` or `"knapsack"`.

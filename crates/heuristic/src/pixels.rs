@@ -3,7 +3,7 @@
 
 /// Object id of a pixel that no object covers (sky).
 pub const SKY_ID: u32 = u32::MAX;
-/// Object id of a pixel covered by the ray-traced RT-scene (point cloud, DESIGN §5), not by a
+/// Object id of a pixel covered by the ray-traced RT-scene (point cloud, design §5), not by a
 /// selectable object.
 pub const RT_SCENE_ID: u32 = u32::MAX - 1;
 
@@ -71,7 +71,7 @@ impl Run {
     }
 }
 
-/// The heuristic mask (DESIGN §2): `mask[p] = 1.0` where pixel `p`'s object is selected, else
+/// The heuristic mask (design §2): `mask[p] = 1.0` where pixel `p`'s object is selected, else
 /// `0.0` (sky, RT-scene and ids `>= selected.len()` give 0).
 ///
 /// `object_id` and `mask` are the same image and should have the same length; if they do not,

@@ -125,7 +125,7 @@ pub fn select_paper(nodes: &[Candidate], budget: f64) -> Vec<usize> {
     selected
 }
 
-/// DESIGN §4's restatement of listing 6, written for clarity (O(n²)), used to test
+/// design §4's restatement of listing 6, written for clarity (O(n²)), used to test
 /// [`select_paper`]: while budget is left, drop every remaining node costlier than the budget
 /// left, then select the most relevant remaining node.
 pub fn select_restatement(nodes: &[Candidate], budget: f64) -> Vec<usize> {

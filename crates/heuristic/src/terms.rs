@@ -1,4 +1,4 @@
-//! The second phase's per-object quantities (paper §3.2, eq. 1–3, Table 3; DESIGN §4).
+//! The second phase's per-object quantities (paper §3.2, eq. 1–3, Table 3; design §4).
 
 use glam::{Mat4, Vec3};
 

@@ -44,7 +44,7 @@ impl Camera {
 
     /// View → clip with reversed-Z depth in [0, 1]: near plane → 1, far plane → 0.
     ///
-    /// For perspective this is `z_w = n·f / ((f − n)·(−z_e)) − n/(f − n)` (DESIGN §5).
+    /// For perspective this is `z_w = n·f / ((f − n)·(−z_e)) − n/(f − n)` (design §5).
     pub fn projection(&self, aspect: f32) -> Mat4 {
         match self.projection {
             Projection::Perspective { fov_y_deg, near: n, far: f } => {

@@ -1,4 +1,4 @@
-//! TOML scene files (DESIGN §6; the reference is `docs/scene-format.md`).
+//! TOML scene files (design §6; the reference is `docs/scene-format.md`).
 //!
 //! Two steps: serde reads the text into the `*Toml` structs below (every table rejects unknown
 //! keys, and the values that are validated later keep their byte span), then [`Builder`] checks

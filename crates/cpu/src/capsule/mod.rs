@@ -1,11 +1,12 @@
-//! The RT-scene capsule (paper 2, DESIGN §5): a plug-in that ray traces a point cloud of spheres
+//! The RT-scene capsule (paper 2, design §5): a plug-in that ray traces a point cloud of spheres
 //! and hands the host a packed frame (colour + depth per texel) for the depth merge.
 //!
-//! The host sees only [`RtCapsule`]: "give me a packed frame for this camera". The frame exchange
-//! is the paper's handshake ([`FrameExchange`]): the host signals "host finished" (semaphore S1),
-//! the capsule thread renders (ray generation, trace, shading, block D, block P), signals
-//! "capsule finished" (S2) with the frame, and the host merges (block U). [`render_sync`] is the
-//! same exchange without a thread, for tests and the single-threaded frame.
+//! The host sees only [`RtCapsule`]: "give me a packed frame for this camera". The CPU frame
+//! calls it in line (the raster needs its frame first, or in `--clip-capsule` order it needs the
+//! raster's depth, so there is nothing to overlap it with); [`render_sync`] is that call with a
+//! fresh frame. Paper 2's semaphore handshake between a host and a capsule on its own thread is
+//! kept as a test (`tests/support/exchange.rs`), which proves the plug-in boundary is enough to
+//! run a capsule that way.
 //!
 //! [`PointCloudCapsule`] builds **one sphere BVH per cloud** (each cloud has its own radius; a
 //! scene usually has one cloud) and traces them in turn with a shrinking `t_max`, so the closest
@@ -15,8 +16,6 @@
 //! secondary rays ([`PointCloudCapsule::closest_surface`], [`PointCloudCapsule::occluded`])
 //! always use the BVH.
 
-use std::sync::mpsc::{Receiver, Sender, channel};
-use std::thread::JoinHandle;
 use std::time::Instant;
 
 use glam::{Mat4, Vec3};
@@ -58,126 +57,6 @@ pub fn render_sync(capsule: &mut dyn RtCapsule, request: &CapsuleRequest<'_>) ->
     let mut frame = PackedRtFrame::new(request.width, request.height);
     let stats = capsule.render(request, &mut frame);
     (frame, stats)
-}
-
-/// An owned [`CapsuleRequest`], to cross to the capsule thread.
-#[derive(Debug, Clone)]
-pub struct OwnedCapsuleRequest {
-    pub camera: Camera,
-    pub width: u32,
-    pub height: u32,
-    pub clip_depth: Option<Vec<f32>>,
-}
-
-impl OwnedCapsuleRequest {
-    pub fn as_request(&self) -> CapsuleRequest<'_> {
-        CapsuleRequest { camera: self.camera, width: self.width, height: self.height, clip_depth: self.clip_depth.as_deref() }
-    }
-}
-
-/// Where the exchange stands (the paper's two semaphore pairs: S1 "host finished", S2 "capsule
-/// finished"; each resets after it is consumed).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ExchangeState {
-    /// Both semaphores in standby: the host owns the frame and may merge it or ask for the next.
-    HostOwnsFrame,
-    /// S1 signalled: the capsule is rendering; the host waits on S2.
-    CapsuleRendering,
-}
-
-/// A misuse of the exchange or a capsule thread that died.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum ExchangeError {
-    /// `host_finished` while the capsule is still rendering, or `wait_capsule_finished` with no
-    /// frame requested.
-    OutOfOrder(ExchangeState),
-    /// The capsule thread has stopped (it panicked).
-    CapsuleGone,
-}
-
-impl std::fmt::Display for ExchangeError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::OutOfOrder(s) => write!(f, "frame exchange called out of order (state {s:?})"),
-            Self::CapsuleGone => write!(f, "the RT capsule thread has stopped"),
-        }
-    }
-}
-
-impl std::error::Error for ExchangeError {}
-
-enum HostSignal {
-    /// S1: the host finished its frame; render this request into this (recycled) buffer.
-    HostFinished(OwnedCapsuleRequest, PackedRtFrame),
-    Stop,
-}
-
-/// The handshake with a capsule running on its own thread. Per frame:
-/// `host_finished(request)` (S1) → capsule renders → `wait_capsule_finished()` (S2) returns the
-/// frame → the host merges it → `recycle(frame)` returns the buffer for the next frame.
-pub struct FrameExchange {
-    to_capsule: Sender<HostSignal>,
-    from_capsule: Receiver<(PackedRtFrame, CapsuleStats)>,
-    thread: Option<JoinHandle<()>>,
-    state: ExchangeState,
-    spare: Option<PackedRtFrame>,
-}
-
-impl FrameExchange {
-    /// Starts the capsule thread.
-    pub fn spawn(mut capsule: Box<dyn RtCapsule>) -> std::io::Result<Self> {
-        let (to_capsule, host_rx) = channel::<HostSignal>();
-        let (capsule_tx, from_capsule) = channel();
-        let thread = std::thread::Builder::new().name("rt-capsule".into()).spawn(move || {
-            while let Ok(HostSignal::HostFinished(request, mut frame)) = host_rx.recv() {
-                let stats = capsule.render(&request.as_request(), &mut frame);
-                // S2: capsule finished.
-                if capsule_tx.send((frame, stats)).is_err() {
-                    break;
-                }
-            }
-        })?;
-        Ok(Self { to_capsule, from_capsule, thread: Some(thread), state: ExchangeState::HostOwnsFrame, spare: None })
-    }
-
-    pub fn state(&self) -> ExchangeState {
-        self.state
-    }
-
-    /// Signals S1 (host finished): the capsule starts rendering `request`.
-    pub fn host_finished(&mut self, request: OwnedCapsuleRequest) -> Result<(), ExchangeError> {
-        if self.state != ExchangeState::HostOwnsFrame {
-            return Err(ExchangeError::OutOfOrder(self.state));
-        }
-        let frame = self.spare.take().unwrap_or_else(|| PackedRtFrame::new(0, 0));
-        self.to_capsule.send(HostSignal::HostFinished(request, frame)).map_err(|_| ExchangeError::CapsuleGone)?;
-        self.state = ExchangeState::CapsuleRendering;
-        Ok(())
-    }
-
-    /// Waits for S2 (capsule finished) and takes the packed frame.
-    pub fn wait_capsule_finished(&mut self) -> Result<(PackedRtFrame, CapsuleStats), ExchangeError> {
-        if self.state != ExchangeState::CapsuleRendering {
-            return Err(ExchangeError::OutOfOrder(self.state));
-        }
-        let r = self.from_capsule.recv().map_err(|_| ExchangeError::CapsuleGone)?;
-        self.state = ExchangeState::HostOwnsFrame;
-        Ok(r)
-    }
-
-    /// Hands a merged frame's buffer back so the next frame reuses its allocation.
-    pub fn recycle(&mut self, frame: PackedRtFrame) {
-        self.spare = Some(frame);
-    }
-}
-
-impl Drop for FrameExchange {
-    fn drop(&mut self) {
-        let _ = self.to_capsule.send(HostSignal::Stop);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
 }
 
 /// One pixel's primary ray (ray generation, paper eq. 3–5): world origin, unit world direction,

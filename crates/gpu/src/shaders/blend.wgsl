@@ -1,4 +1,4 @@
-// Stage 4 (paper listing 10, eq. 4–6; DESIGN §3): lighting, shadow, reflection and refraction
+// Stage 4 (paper listing 10, eq. 4–6; design §3): lighting, shadow, reflection and refraction
 // combined under the mask and the optical properties, then sRGB-encoded to 8 bits. The WGSL twin
 // of hybrid_core::blend::{blend_pixel, encode_srgb}.
 

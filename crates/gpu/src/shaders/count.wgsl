@@ -1,4 +1,4 @@
-// Stage 2, first pass (DESIGN §4, paper Table 3): A = the number of pixels each object covers,
+// Stage 2, first pass (design §4, paper Table 3): A = the number of pixels each object covers,
 // for every object in one pass over the object-id target. The WGSL twin of
 // hybrid_heuristic::count_visible_pixels: ids >= object_count (sky = NO_OBJECT, the RT-scene =
 // RT_SCENE_OBJECT, anything stale) are not counted.

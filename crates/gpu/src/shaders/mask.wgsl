@@ -1,4 +1,4 @@
-// Stage 2, last pass (DESIGN §2, §4): the heuristic mask from the object-id target. The WGSL twin
+// Stage 2, last pass (design §2, §4): the heuristic mask from the object-id target. The WGSL twin
 // of hybrid_heuristic::write_mask (mode OBJECTS) and of the CPU frame's rt-only rule (mode
 // ALL_COVERED: every pixel with an id, the RT-scene's included); mode NOTHING (raster) clears it.
 
