@@ -17,7 +17,8 @@ use std::time::Instant;
 use criterion::{Criterion, criterion_group};
 use glam::Vec3;
 use hybrid_core::depth_merge::{PackedRtFrame, encode_hit, synthesize_depth};
-use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RayGen, RtCapsule};
+use hybrid_cpu::camera_rays::RayGen;
+use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule};
 use hybrid_cpu::spheres::SphereBvh;
 use hybrid_scene::{Camera, DirectionalLight, Environment, Lights, PointCloud, PointColoring, Projection};
 

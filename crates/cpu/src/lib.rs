@@ -3,6 +3,7 @@
 
 pub mod blend;
 pub mod bvh;
+pub mod camera_rays;
 pub mod capsule;
 pub mod frame;
 pub mod lighting;

@@ -1,92 +1,15 @@
 //! Stage 1b, deferred lighting (paper listing 5): the G-buffer into the P-buffer. Covered pixels
 //! get `emission + env_ambient · ambient + Σ lights Blinn–Phong` (unshadowed; shadows are the
 //! trace stage's), sky pixels the skybox seen along the pixel's view ray.
-//!
-//! Also the camera's primary rays ([`primary_ray`], [`ViewRays`]): the sky lookup here and the
-//! trace stage's `rt-only` mode use the same rays, so both modes agree.
+//! Sky pixels look along `camera_rays::ViewRays`, which also gives every pixel's view direction.
 
 use glam::{Vec3, Vec4};
 use hybrid_core::shading::{FrameLights, sky};
 use hybrid_core::{GBuffer, NO_OBJECT, Surface};
-use hybrid_scene::{Camera, Environment, Projection, Scene, Skybox, Texture};
+use hybrid_scene::{Camera, Environment, Scene, Skybox, Texture};
 use rayon::prelude::*;
 
-/// Primary rays of a camera for a `width × height` image (row 0 at the top), through pixel
-/// centres, matching the raster's view-projection exactly: the ray of pixel (x, y) projects onto
-/// that pixel centre.
-///
-/// Perspective rays start at the eye (the camera position), so a hit at parameter `t` along the
-/// unit direction lies at view depth `t · (dir · forward)`; orthographic rays start on the plane
-/// through the camera position, all along `forward`. Neither is clipped at the near plane:
-/// callers who want the raster's near clipping start at `t = near / (dir · forward)`.
-#[derive(Debug, Clone, Copy)]
-pub struct ViewRays {
-    origin: Vec3,
-    right: Vec3,
-    up: Vec3,
-    forward: Vec3,
-    /// Half extents of the image at unit distance (perspective) or in world units (ortho).
-    half_w: f32,
-    half_h: f32,
-    width: f32,
-    height: f32,
-    orthographic: bool,
-}
-
-impl ViewRays {
-    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        // The basis of the view matrix itself, so rays and raster share one camera frame.
-        let inv_view = camera.view().inverse();
-        let aspect = width as f32 / height.max(1) as f32;
-        let (half_h, orthographic) = match camera.projection {
-            Projection::Perspective { fov_y_deg, .. } => ((fov_y_deg.to_radians() * 0.5).tan(), false),
-            Projection::Orthographic { height, .. } => (height * 0.5, true),
-        };
-        Self {
-            origin: inv_view.w_axis.truncate(),
-            right: inv_view.x_axis.truncate(),
-            up: inv_view.y_axis.truncate(),
-            forward: -inv_view.z_axis.truncate(),
-            half_w: half_h * aspect,
-            half_h,
-            width: width as f32,
-            height: height as f32,
-            orthographic,
-        }
-    }
-
-    /// Ray through the continuous image position (sx, sy) in pixels ((0, 0) = top-left corner of
-    /// the image; pixel centres are at +0.5). Returns (origin, unit direction).
-    #[inline]
-    pub fn ray_at(&self, sx: f32, sy: f32) -> (Vec3, Vec3) {
-        let nx = sx / self.width * 2.0 - 1.0;
-        let ny = 1.0 - sy / self.height * 2.0;
-        let offset = self.right * (nx * self.half_w) + self.up * (ny * self.half_h);
-        if self.orthographic {
-            (self.origin + offset, self.forward)
-        } else {
-            (self.origin, (self.forward + offset).normalize_or(self.forward))
-        }
-    }
-
-    /// Ray through the centre of pixel (px, py).
-    #[inline]
-    pub fn ray(&self, px: u32, py: u32) -> (Vec3, Vec3) {
-        self.ray_at(px as f32 + 0.5, py as f32 + 0.5)
-    }
-
-    /// Unit direction from a surface point towards the viewer (−forward for orthographic).
-    #[inline]
-    pub fn view_dir(&self, point: Vec3) -> Vec3 {
-        if self.orthographic { -self.forward } else { (self.origin - point).normalize_or(-self.forward) }
-    }
-}
-
-/// The primary ray (origin, unit direction) through the centre of pixel (px, py) of a
-/// `width × height` image; see [`ViewRays`] (build one of those for many rays).
-pub fn primary_ray(camera: &Camera, width: u32, height: u32, px: u32, py: u32) -> (Vec3, Vec3) {
-    ViewRays::new(camera, width, height).ray(px, py)
-}
+use crate::camera_rays::ViewRays;
 
 /// Rows per parallel task of [`deferred_lighting`].
 const LIGHTING_ROWS: usize = 8;
@@ -237,6 +160,7 @@ fn sky_run(rays: &ViewRays, env: &Environment, textures: &[Texture], width: usiz
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hybrid_scene::Projection;
 
     /// The four-wide sky path gives every sky pixel exactly `sky` of its view ray, for
     /// perspective and orthographic cameras, gradient and one-colour skyboxes, and sizes whose
@@ -263,28 +187,6 @@ mod tests {
                     let want = sky(&scene.environment, &scene.textures, rays.ray(x, y).1);
                     assert_eq!(c.to_array().map(f32::to_bits), want.to_array().map(f32::to_bits), "pixel ({x}, {y}) of {w}×{h}");
                 }
-            }
-        }
-    }
-
-    #[test]
-    fn rays_project_onto_their_pixel_centres() {
-        for projection in [
-            Projection::Perspective { fov_y_deg: 70.0, near: 0.1, far: 100.0 },
-            Projection::Orthographic { height: 6.0, near: 0.1, far: 100.0 },
-        ] {
-            let cam = Camera { position: Vec3::new(1.0, 2.0, 3.0), target: Vec3::new(-1.0, 0.5, -2.0), up: Vec3::Y, projection };
-            let (w, h) = (64u32, 36u32);
-            let vp = cam.view_projection(w as f32 / h as f32);
-            let rays = ViewRays::new(&cam, w, h);
-            for (x, y) in [(0u32, 0u32), (63, 35), (10, 30), (32, 18)] {
-                let (o, d) = rays.ray(x, y);
-                assert!((d.length() - 1.0).abs() < 1e-5);
-                let p = vp.project_point3(o + d * 7.5);
-                let sx = (p.x * 0.5 + 0.5) * w as f32;
-                let sy = (0.5 - p.y * 0.5) * h as f32;
-                assert!((sx - (x as f32 + 0.5)).abs() < 1e-3 && (sy - (y as f32 + 0.5)).abs() < 1e-3, "{x},{y} -> {sx},{sy}");
-                assert_eq!(primary_ray(&cam, w, h, x, y), (o, d));
             }
         }
     }

@@ -21,12 +21,13 @@
 //! Output is bit-identical for any number of threads: chunking and banding are fixed, each
 //! band runs its triangles in scene order, and equal depths keep the earlier triangle.
 
-use glam::{BVec4A, DMat3, DMat4, DVec3, Mat4, Vec3, Vec4};
+use glam::{BVec4A, DMat3, DVec3, Mat4, Vec3, Vec4};
 use hybrid_core::lanes::{V3, aos};
 use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
+use crate::camera_rays::PrimaryRays;
 use hybrid_core::prepare::{Plain4, PreparedScene, TriangleRef, TriangleSurface};
 
 /// Rows per band (the unit of parallel work and of binning).
@@ -92,7 +93,7 @@ pub fn merge_rt_layer(gbuffer: &mut GBuffer, layer: &RtLayer, camera: &Camera) {
     if !layer_fits(layer, w, h) {
         return;
     }
-    let unproject = Unproject::new(camera, w, h);
+    let rays = PrimaryRays::new(camera, w, h);
     // Runs of rows in parallel (each pixel is independent).
     let band_len = w as usize * MERGE_ROWS;
     split_bands(gbuffer, band_len).into_par_iter().enumerate().for_each(|(band, mut rows)| {
@@ -102,7 +103,7 @@ pub fn merge_rt_layer(gbuffer: &mut GBuffer, layer: &RtLayer, camera: &Camera) {
             let d = layer.depth[i];
             if d > 0.0 && d > rows.depth[k] {
                 let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
-                let s = unproject.rt_surface(x, y, d, layer.color[i]);
+                let s = rt_surface_with(&rays, x, y, d, layer.color[i]);
                 rows.write(k, RT_SCENE_OBJECT, d, &s);
             }
         }
@@ -116,7 +117,24 @@ const MERGE_ROWS: usize = 16;
 /// reproduces it), no other reflectance, opaque, IOR 1; position = the pixel centre at `depth`
 /// unprojected with the inverse view-projection; normal = unit vector towards the camera.
 pub fn rt_surface(camera: &Camera, width: u32, height: u32, x: u32, y: u32, depth: f32, color: Vec3) -> Surface {
-    Unproject::new(camera, width, height).rt_surface(x, y, depth, color)
+    rt_surface_with(&PrimaryRays::new(camera, width, height), x, y, depth, color)
+}
+
+/// [`rt_surface`] with the frame's rays already set up.
+fn rt_surface_with(rays: &PrimaryRays, x: u32, y: u32, depth: f32, color: Vec3) -> Surface {
+    let position = rays.point_at_depth(x, y, depth);
+    Surface {
+        position,
+        normal: rays.towards_camera(position),
+        emission: color,
+        ambient: Vec3::ZERO,
+        diffuse: Vec3::ZERO,
+        opacity: 1.0,
+        specular: Vec3::ZERO,
+        shininess: 0.0,
+        reflectivity: 0.0,
+        ior: 1.0,
+    }
 }
 
 fn layer_fits(layer: &RtLayer, w: u32, h: u32) -> bool {
@@ -126,47 +144,6 @@ fn layer_fits(layer: &RtLayer, w: u32, h: u32) -> bool {
         tracing::warn!(layer_w = layer.width, layer_h = layer.height, w, h, "RT layer size differs from the frame; ignored");
     }
     ok
-}
-
-struct Unproject {
-    inv_vp: DMat4,
-    width: f64,
-    height: f64,
-    camera_pos: Vec3,
-    back: Vec3,
-    orthographic: bool,
-}
-
-impl Unproject {
-    fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        let aspect = width as f32 / height.max(1) as f32;
-        Self {
-            inv_vp: camera.view_projection(aspect).as_dmat4().inverse(),
-            width: width as f64,
-            height: height as f64,
-            camera_pos: camera.position,
-            back: -camera.forward(),
-            orthographic: camera.is_orthographic(),
-        }
-    }
-
-    fn rt_surface(&self, x: u32, y: u32, depth: f32, color: Vec3) -> Surface {
-        let ndc = DVec3::new((x as f64 + 0.5) / self.width * 2.0 - 1.0, 1.0 - (y as f64 + 0.5) / self.height * 2.0, depth as f64);
-        let p = self.inv_vp.project_point3(ndc).as_vec3();
-        let normal = if self.orthographic { self.back } else { (self.camera_pos - p).normalize_or(self.back) };
-        Surface {
-            position: p,
-            normal,
-            emission: color,
-            ambient: Vec3::ZERO,
-            diffuse: Vec3::ZERO,
-            opacity: 1.0,
-            specular: Vec3::ZERO,
-            shininess: 0.0,
-            reflectivity: 0.0,
-            ior: 1.0,
-        }
-    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -843,11 +820,11 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     let chunks = &*chunks;
 
     // Pass 3: bands (visibility, then shading of the winners).
-    let unproject = Unproject::new(camera, width, height);
+    let rays = PrimaryRays::new(camera, width, height);
     let w = width as usize;
     let band_len = w * BAND_ROWS as usize;
     let rows = split_bands(g, band_len);
-    let ctx = BandContext { prepared, chunks, rt_layer, unproject: &unproject, width, height, clear };
+    let ctx = BandContext { prepared, chunks, rt_layer, rays: &rays, width, height, clear };
     rows.into_par_iter()
         .enumerate()
         .with_max_len(1)
@@ -876,7 +853,7 @@ struct BandContext<'a, 's> {
     prepared: &'a PreparedScene<'s>,
     chunks: &'a [Chunk],
     rt_layer: Option<&'a RtLayer>,
-    unproject: &'a Unproject,
+    rays: &'a PrimaryRays,
     width: u32,
     height: u32,
     clear: bool,
@@ -932,7 +909,7 @@ impl BandContext<'_, '_> {
                     }
                     VIS_RT => {
                         let color = self.rt_layer.map_or(Vec3::ZERO, |l| l.color[base + i]);
-                        out.write(i, RT_SCENE_OBJECT, depth[i], &self.unproject.rt_surface(x as u32, y, depth[i], color));
+                        out.write(i, RT_SCENE_OBJECT, depth[i], &rt_surface_with(self.rays, x as u32, y, depth[i], color));
                         if self.clear {
                             out.mask[i] = 0.0;
                         }

@@ -27,14 +27,15 @@
 //! leaves from (so refraction rays entering glass start inside it). Pixels are independent, so
 //! the output is bit-identical for any thread count.
 
-use glam::{DMat4, DVec3, Vec2, Vec3};
+use glam::{Vec2, Vec3};
 use hybrid_core::blend::combine;
 use hybrid_core::shading::{FrameLights, facing, lights, reflect, refract_or_reflect, sky};
 use hybrid_core::{GBuffer, Surface};
-use hybrid_scene::{Camera, Projection};
+use hybrid_scene::Camera;
 use rayon::prelude::*;
 
 use crate::bvh::{SceneBvh, ShadowCache};
+use crate::camera_rays::PrimaryRays;
 use crate::capsule::PointCloudCapsule;
 use crate::raster::split_bands;
 use hybrid_core::prepare::PreparedScene;
@@ -163,6 +164,14 @@ impl Tracer<'_, '_> {
         };
         let view = -incident;
 
+        (self.shadow_rays(&s, view, caches, rays), self.reflection_ray(&s, incident, rays), self.refraction_ray(&s, incident, rays))
+    }
+
+    /// Listing 8a's shadows for surface `s` seen along `view`: 1 minus the Blinn–Phong light of
+    /// each shadow-casting light that occluders block (× 1 − their attenuation, listing 8b).
+    #[inline]
+    fn shadow_rays(&self, s: &Surface, view: Vec3, caches: &mut [ShadowCache], rays: &mut RayCounts) -> Vec3 {
+        let scene = self.prepared.scene;
         let mut shadow = Vec3::ONE;
         let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
         for (k, (light, cache)) in lights(&scene.lights).zip(caches.iter_mut()).enumerate() {
@@ -177,27 +186,40 @@ impl Tracer<'_, '_> {
                 continue;
             }
             rays.shadow += 1;
-            let origin = self.offset(&s, dir);
+            let origin = self.offset(s, dir);
             let mut att = self.bvh.any_hit_attenuation_cached(self.prepared, origin, dir, dist, cache);
             if att > 0.0 && self.spheres.is_some_and(|c| c.occluded(origin, dir, 0.0, dist)) {
                 att = 0.0;
             }
             if att < 1.0 {
-                shadow -= self.frame_lights.blinn_phong_incident((dir, radiance), &s, view) * (1.0 - att);
+                shadow -= self.frame_lights.blinn_phong_incident((dir, radiance), s, view) * (1.0 - att);
             }
         }
+        shadow
+    }
 
-        let mut reflection = Vec3::ZERO;
+    /// Listing 8a's reflection: the view ray (`incident`) reflected about the normal and traced,
+    /// if the surface reflects.
+    #[inline]
+    fn reflection_ray(&self, s: &Surface, incident: Vec3, rays: &mut RayCounts) -> Vec3 {
         if s.reflectivity > 0.0 {
             let dir = reflect(incident, s.normal).normalize_or_zero();
-            reflection = self.secondary(self.offset(&s, dir), dir, s.reflectivity, 1, Kind::Reflection, rays);
+            self.secondary(self.offset(s, dir), dir, s.reflectivity, 1, Kind::Reflection, rays)
+        } else {
+            Vec3::ZERO
         }
-        let mut refraction = Vec3::ZERO;
+    }
+
+    /// Listing 8a's refraction: the view ray refracted by the IOR ratio (reflected on total
+    /// internal reflection) and traced, if the surface is not opaque.
+    #[inline]
+    fn refraction_ray(&self, s: &Surface, incident: Vec3, rays: &mut RayCounts) -> Vec3 {
         if s.opacity < 1.0 {
-            let (dir, _tir) = refract_or_reflect(incident, s.normal, scene.environment.ior, s.ior);
-            refraction = self.secondary(self.offset(&s, dir), dir, 1.0 - s.opacity, 1, Kind::Refraction, rays);
+            let (dir, _tir) = refract_or_reflect(incident, s.normal, self.prepared.scene.environment.ior, s.ior);
+            self.secondary(self.offset(s, dir), dir, 1.0 - s.opacity, 1, Kind::Refraction, rays)
+        } else {
+            Vec3::ZERO
         }
-        (shadow, reflection, refraction)
     }
 
     /// `s.position` moved by the ray bias along the normal, to the side `dir` leaves towards.
@@ -251,59 +273,6 @@ impl Tracer<'_, '_> {
             refr = lighting;
         }
         combine(lighting, refl, refr, reflectivity, transparency)
-    }
-}
-
-/// Primary rays through pixel centres (row 0 at the top), from the inverse of the raster's
-/// view-projection, so a hit projects back onto its pixel centre. Each ray starts on the near
-/// plane and ends on the far plane, as the raster clips.
-#[derive(Debug, Clone, Copy)]
-pub struct PrimaryRays {
-    inv_view_proj: DMat4,
-    width: u32,
-    height: u32,
-    /// World size of one pixel at unit distance (perspective) or everywhere (orthographic).
-    pixel_size: f32,
-    orthographic: bool,
-    camera: Vec3,
-}
-
-impl PrimaryRays {
-    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        let (w, h) = (width.max(1), height.max(1));
-        let aspect = w as f32 / h as f32;
-        let vp = camera.view_projection(aspect).as_dmat4();
-        let pixel_size = match camera.projection {
-            Projection::Perspective { fov_y_deg, .. } => 2.0 * (fov_y_deg.to_radians() * 0.5).tan() / h as f32,
-            Projection::Orthographic { height, .. } => height / h as f32,
-        };
-        Self {
-            inv_view_proj: vp.inverse(),
-            width: w,
-            height: h,
-            pixel_size,
-            orthographic: camera.is_orthographic(),
-            camera: camera.position,
-        }
-    }
-
-    /// `(origin on the near plane, unit direction, distance to the far plane)` for pixel (x, y).
-    pub fn ray(&self, x: u32, y: u32) -> (Vec3, Vec3, f32) {
-        let nx = (x as f64 + 0.5) / self.width as f64 * 2.0 - 1.0;
-        let ny = 1.0 - (y as f64 + 0.5) / self.height as f64 * 2.0;
-        let near = self.inv_view_proj.project_point3(DVec3::new(nx, ny, 1.0));
-        let far = self.inv_view_proj.project_point3(DVec3::new(nx, ny, 0.0));
-        let d = far - near;
-        let len = d.length();
-        if len <= 0.0 || !len.is_finite() {
-            return (near.as_vec3(), Vec3::NEG_Z, 0.0);
-        }
-        (near.as_vec3(), (d / len).as_vec3(), len as f32)
-    }
-
-    /// World size of one pixel at `point` (for texture footprints).
-    fn pixel_world_size(&self, point: Vec3) -> f32 {
-        if self.orthographic { self.pixel_size } else { self.pixel_size * point.distance(self.camera) }
     }
 }
 

@@ -4,7 +4,8 @@ use glam::{DMat4, DVec3, DVec4, Vec3};
 use hybrid_core::depth_merge::{
     PackedRtFrame, alpha_kept, decode_texel, encode_hit, pack_texel, pack_unorm4x8, unpack, unpack_texel, unpack_unorm4x8,
 };
-use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RayGen, RtCapsule, render_sync};
+use hybrid_cpu::camera_rays::RayGen;
+use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule, render_sync};
 use hybrid_cpu::spheres::{SphereBvh, closest_hit_brute_force};
 use hybrid_scene::texture::linear_to_srgb;
 use hybrid_scene::{Camera, DirectionalLight, Environment, Lights, PointCloud, PointColoring, Projection};

@@ -6,10 +6,10 @@ use std::path::Path;
 
 use hybrid_core::{FrameSettings, Mode, NO_OBJECT, RT_SCENE_OBJECT};
 use hybrid_cpu::bvh::SceneBvh;
+use hybrid_cpu::camera_rays::PrimaryRays;
 use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::{CpuRenderer, Frame};
 use hybrid_cpu::spheres::SphereBvh;
-use hybrid_cpu::trace::PrimaryRays;
 use hybrid_scene::load_scene;
 
 fn tree_scene() -> hybrid_scene::Scene {

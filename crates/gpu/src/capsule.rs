@@ -1,5 +1,5 @@
 //! `capsule`: paper 2 on the GPU (design §5). Stage 0 is one compute pass (`capsule.wgsl`, 8×8
-//! workgroups): per pixel the CPU capsule's primary ray (`hybrid_cpu::capsule::RayGen`, bit for
+//! workgroups): per pixel the CPU capsule's primary ray (`hybrid_cpu::camera_rays::RayGen`, bit for
 //! bit from the frame uniforms' `raygen_*`), the closest sphere (`spheres.wgsl`), Blinn–Phong with
 //! the scene's lights and ambient, block D and block P into `targets.packed` (RGBA16UI). Block U
 //! (`unpack.wgsl`) is a render pass that clears the G-buffer and depth and writes each kept RT

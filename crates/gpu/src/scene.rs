@@ -126,7 +126,7 @@ pub struct FrameUniforms {
     pub sky_faces1: [i32; 4],
     /// light count, object count, triangle count, unused.
     pub counts: [u32; 4],
-    /// The CPU capsule's ray generation (`hybrid_cpu::capsule::RayGen`), exactly: the view → world
+    /// The CPU capsule's ray generation (`hybrid_cpu::camera_rays::RayGen`), exactly: the view → world
     /// rotation's columns (the transpose of the view matrix's rotation; w unused), so the GPU
     /// capsule's rays and synthesized depths are bit-identical to the CPU's.
     pub raygen_rot: [[f32; 4]; 3],

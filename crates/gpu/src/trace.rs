@@ -162,9 +162,9 @@ impl TracePasses {
         Ok(Self {
             device: device.clone(),
             spheres: spheres.bind_group.clone(),
-            shadow: pipeline("shadow_main"),
-            reflection: pipeline("reflection_main"),
-            refraction: pipeline("refraction_main"),
+            shadow: pipeline("shadow_rays"),
+            reflection: pipeline("reflection_ray"),
+            refraction: pipeline("refraction_ray"),
             bvh,
             layout,
             params,

@@ -18,17 +18,15 @@
 
 use std::time::Instant;
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use hybrid_core::Surface;
-use hybrid_core::depth_merge::{
-    MISS_TEXEL, PackedRtFrame, encode_hit, synthesize_depth, synthesize_depth_orthographic, view_z_from_depth,
-    view_z_from_depth_orthographic,
-};
+use hybrid_core::depth_merge::{MISS_TEXEL, PackedRtFrame, encode_hit};
 use hybrid_core::point_colors::PointColors;
 use hybrid_core::shading::FrameLights;
 use hybrid_scene::{Camera, Environment, Lights, PointCloud};
 use rayon::prelude::*;
 
+use crate::camera_rays::{PrimaryRay, RayGen};
 use crate::spheres::{BatchRay, BatchScratch, SphereBvh, SphereBvhError, TraversalStack};
 
 mod projected;
@@ -57,110 +55,6 @@ pub fn render_sync(capsule: &mut dyn RtCapsule, request: &CapsuleRequest<'_>) ->
     let mut frame = PackedRtFrame::new(request.width, request.height);
     let stats = capsule.render(request, &mut frame);
     (frame, stats)
-}
-
-/// One pixel's primary ray (ray generation, paper eq. 3–5): world origin, unit world direction,
-/// the direction's view-space z (for block D) and the frustum's `t` range (near to far plane).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PrimaryRay {
-    pub origin: Vec3,
-    pub dir: Vec3,
-    pub dir_view_z: f32,
-    pub t_min: f32,
-    pub t_max: f32,
-}
-
-/// Ray generation for a camera and image size: pixel centres, row 0 at the top. The view-space
-/// direction inverts the camera's projection exactly (`x_ndc / P₀₀`, `y_ndc / P₁₁`), so a hit
-/// projects back onto its pixel centre with the raster's view-projection.
-#[derive(Debug, Clone, Copy)]
-pub struct RayGen {
-    /// View → world rotation (the transpose of the view matrix's rotation).
-    view_inv: Mat4,
-    /// The camera position, exactly (not through the inverse matrix, whose rounding is ~1e-7 of the
-    /// camera's distance from the origin: too much for a 1 cm near plane).
-    eye: Vec3,
-    sx: f32,
-    sy: f32,
-    width: f32,
-    height: f32,
-    near: f32,
-    far: f32,
-    ortho: bool,
-}
-
-impl RayGen {
-    pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        let aspect = width.max(1) as f32 / height.max(1) as f32;
-        let p = camera.projection(aspect);
-        let (near, far) = camera.near_far();
-        let view = camera.view();
-        let rot = Mat4::from_mat3(glam::Mat3::from_mat4(view).transpose());
-        Self {
-            view_inv: rot,
-            eye: camera.position,
-            sx: p.x_axis.x,
-            sy: p.y_axis.y,
-            width: width as f32,
-            height: height as f32,
-            near,
-            far,
-            ortho: camera.is_orthographic(),
-        }
-    }
-
-    #[inline]
-    pub fn ray(&self, col: u32, row: u32) -> PrimaryRay {
-        self.ray_at(self.view_x(col), self.view_y(row))
-    }
-
-    /// The view-plane x of column `col`'s centre (`x_ndc / P₀₀`); depends on the column only, so
-    /// a frame computes it once per column for [`RayGen::ray_at`].
-    #[inline]
-    pub fn view_x(&self, col: u32) -> f32 {
-        let x = 2.0 * (col as f32 + 0.5) / self.width - 1.0;
-        x / self.sx
-    }
-
-    /// The view-plane y of row `row`'s centre (`y_ndc / P₁₁`), as [`RayGen::view_x`].
-    #[inline]
-    pub fn view_y(&self, row: u32) -> f32 {
-        let y = 1.0 - 2.0 * (row as f32 + 0.5) / self.height;
-        y / self.sy
-    }
-
-    /// The ray through view-plane point (`view_x(col)`, `view_y(row)`): `ray(col, row)`, bit for bit.
-    #[inline]
-    pub fn ray_at(&self, vx: f32, vy: f32) -> PrimaryRay {
-        if self.ortho {
-            let origin = self.eye + self.view_inv.transform_vector3(Vec3::new(vx, vy, 0.0));
-            let dir = self.view_inv.transform_vector3(Vec3::NEG_Z).normalize();
-            PrimaryRay { origin, dir, dir_view_z: -1.0, t_min: self.near, t_max: self.far }
-        } else {
-            let dv = Vec3::new(vx, vy, -1.0).normalize();
-            let dir = self.view_inv.transform_vector3(dv);
-            let origin = self.eye;
-            PrimaryRay { origin, dir, dir_view_z: dv.z, t_min: self.near / -dv.z, t_max: self.far / -dv.z }
-        }
-    }
-
-    /// Block D: reversed-Z window depth of the point at `t` along `ray`.
-    #[inline]
-    pub fn depth(&self, ray: &PrimaryRay, t: f32) -> f32 {
-        if self.ortho {
-            synthesize_depth_orthographic(t, ray.dir_view_z, self.near, self.far)
-        } else {
-            synthesize_depth(t, ray.dir_view_z, self.near, self.far)
-        }
-    }
-
-    /// The `t` along `ray` at which it reaches reversed-Z depth `z_w` (inverse of block D).
-    #[inline]
-    pub fn t_at_depth(&self, ray: &PrimaryRay, z_w: f32) -> f32 {
-        let z_e =
-            if self.ortho { view_z_from_depth_orthographic(z_w, self.near, self.far) } else { view_z_from_depth(z_w, self.near, self.far) };
-        z_e / ray.dir_view_z
-    }
 }
 
 /// Why a capsule could not be built.

@@ -173,10 +173,10 @@ fn in_image(id: vec3<u32>) -> bool {
     return id.x < size.x && id.y < size.y;
 }
 
-/// Listing 8a, shadows: 1 minus the Blinn–Phong light of each shadow-casting light that
+/// Listing 8a, shadows (the CPU's `Tracer::shadow_rays`): 1 minus the Blinn–Phong light of each shadow-casting light that
 /// occluders block (× 1 − attenuation).
 @compute @workgroup_size(8, 8)
-fn shadow_main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn shadow_rays(@builtin(global_invocation_id) id: vec3<u32>) {
     if !in_image(id) {
         return;
     }
@@ -217,10 +217,10 @@ fn shadow_main(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(out_shadow, p, vec4<f32>(shadow, 1.0));
 }
 
-/// Listing 8a, reflections: the reflected view ray traced (if reflectivity > 0); a traced
+/// Listing 8a, reflections (the CPU's `Tracer::reflection_ray`): the reflected view ray traced (if reflectivity > 0); a traced
 /// pixel without a surface shows the sky behind it.
 @compute @workgroup_size(8, 8)
-fn reflection_main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn reflection_ray(@builtin(global_invocation_id) id: vec3<u32>) {
     if !in_image(id) {
         return;
     }
@@ -246,10 +246,10 @@ fn reflection_main(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(out_reflection, p, vec4<f32>(color, 1.0));
 }
 
-/// Listing 8a, refractions: the view ray refracted (reflected on total internal reflection)
+/// Listing 8a, refractions (the CPU's `Tracer::refraction_ray`): the view ray refracted (reflected on total internal reflection)
 /// and traced (if opacity < 1).
 @compute @workgroup_size(8, 8)
-fn refraction_main(@builtin(global_invocation_id) id: vec3<u32>) {
+fn refraction_ray(@builtin(global_invocation_id) id: vec3<u32>) {
     if !in_image(id) {
         return;
     }
