@@ -4,6 +4,9 @@
 
 use glam::{Vec3, Vec4};
 
+use crate::lanes::aos;
+use crate::prepare::Plain4;
+
 /// Object id of pixels no object covers (sky).
 pub const NO_OBJECT: u32 = u32::MAX;
 
@@ -166,5 +169,126 @@ impl RtLayer {
     pub fn new(width: u32, height: u32) -> Self {
         let n = width as usize * height as usize;
         Self { width, height, color: vec![Vec3::ZERO; n], depth: vec![0.0; n] }
+    }
+}
+
+/// One band's rows of every G-buffer target (the band's slices of the frame's vectors).
+pub struct BandRows<'a> {
+    pub position: &'a mut [Vec3],
+    pub normal: &'a mut [Vec3],
+    pub emission: &'a mut [Vec3],
+    pub ambient: &'a mut [Vec3],
+    pub diffuse: &'a mut [Vec4],
+    pub specular: &'a mut [Vec4],
+    pub optical: &'a mut [Vec3],
+    pub object_id: &'a mut [u32],
+    pub mask: &'a mut [f32],
+    pub depth: &'a mut [f32],
+}
+
+impl BandRows<'_> {
+    /// Pixels in the band.
+    pub fn len(&self) -> usize {
+        self.depth.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.depth.is_empty()
+    }
+
+    pub fn set_mask(&mut self, i: usize, mask: f32) {
+        self.mask[i] = mask;
+    }
+
+    /// Exactly what [`GBuffer::write`] does, for a band's slices (a test checks they agree).
+    #[inline(always)]
+    pub fn write(&mut self, i: usize, object_id: u32, depth: f32, s: &Surface) {
+        self.position[i] = s.position;
+        self.normal[i] = s.normal;
+        self.emission[i] = s.emission;
+        self.ambient[i] = s.ambient;
+        self.diffuse[i] = s.diffuse.extend(s.opacity);
+        self.specular[i] = s.specular.extend(s.shininess);
+        self.optical[i] = Vec3::new(s.reflectivity, s.ior, s.opacity);
+        self.object_id[i] = object_id;
+        self.depth[i] = depth;
+    }
+
+    /// [`Self::write`] of the four surfaces of `s` at pixels `i..i + 4`.
+    #[inline(always)]
+    pub fn write4(&mut self, i: usize, object_id: u32, depth: &[f32], s: &Plain4) {
+        let c = &s.constant;
+        let r = i..i + 4;
+        self.position[r.clone()].copy_from_slice(&aos(s.position));
+        self.normal[r.clone()].copy_from_slice(&aos(s.normal));
+        self.emission[r.clone()].fill(c.emission);
+        self.ambient[r.clone()].fill(c.ambient);
+        for (d, v) in self.diffuse[r.clone()].iter_mut().zip(aos(s.diffuse)) {
+            *d = v.extend(c.opacity);
+        }
+        self.specular[r.clone()].fill(c.specular.extend(c.shininess));
+        self.optical[r.clone()].fill(Vec3::new(c.reflectivity, c.ior, c.opacity));
+        self.object_id[r.clone()].fill(object_id);
+        self.depth[r].copy_from_slice(depth);
+    }
+
+    /// What [`GBuffer::new`] holds in a pixel (a test checks they agree).
+    #[inline]
+    pub fn clear(&mut self, i: usize) {
+        self.position[i] = Vec3::ZERO;
+        self.normal[i] = Vec3::ZERO;
+        self.emission[i] = Vec3::ZERO;
+        self.ambient[i] = Vec3::ZERO;
+        self.diffuse[i] = Vec4::ZERO;
+        self.specular[i] = Vec4::ZERO;
+        self.optical[i] = Vec3::ZERO;
+        self.object_id[i] = NO_OBJECT;
+        self.mask[i] = 0.0;
+        self.depth[i] = 0.0;
+    }
+}
+
+impl GBuffer {
+    /// The G-buffer's targets cut into runs of `band_len` pixels, one [`BandRows`] each, to be
+    /// written in parallel.
+    pub fn bands_mut(&mut self, band_len: usize) -> Vec<BandRows<'_>> {
+        let g = self;
+        let mut position = g.position.chunks_mut(band_len);
+        let mut normal = g.normal.chunks_mut(band_len);
+        let mut emission = g.emission.chunks_mut(band_len);
+        let mut ambient = g.ambient.chunks_mut(band_len);
+        let mut diffuse = g.diffuse.chunks_mut(band_len);
+        let mut specular = g.specular.chunks_mut(band_len);
+        let mut optical = g.optical.chunks_mut(band_len);
+        let mut object_id = g.object_id.chunks_mut(band_len);
+        let mut mask = g.mask.chunks_mut(band_len);
+        let mut depth = g.depth.chunks_mut(band_len);
+        let mut out = Vec::new();
+        while let (
+            Some(position),
+            Some(normal),
+            Some(emission),
+            Some(ambient),
+            Some(diffuse),
+            Some(specular),
+            Some(optical),
+            Some(object_id),
+            Some(mask),
+            Some(depth),
+        ) = (
+            position.next(),
+            normal.next(),
+            emission.next(),
+            ambient.next(),
+            diffuse.next(),
+            specular.next(),
+            optical.next(),
+            object_id.next(),
+            mask.next(),
+            depth.next(),
+        ) {
+            out.push(BandRows { position, normal, emission, ambient, diffuse, specular, optical, object_id, mask, depth });
+        }
+        out
     }
 }

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule};
-use crate::{blend, lighting, raster, trace};
+use crate::{blend, depth_merge, lighting, raster, trace};
 use hybrid_core::prepare::PreparedScene;
 
 /// The CPU backend with everything it keeps between frames: the prepared scene, its BVH, the
@@ -117,7 +117,7 @@ impl<'s> CpuRenderer<'s> {
             // unclipped order does it).
             let mut merge_ms = 0.0;
             if let Some(layer) = &rt_layer {
-                timed(&mut merge_ms, || raster::merge_rt_layer(&mut gbuffer, layer, camera));
+                timed(&mut merge_ms, || depth_merge::merge_rt_layer(&mut gbuffer, layer, camera));
             }
             t[Stage::Raster] += merge_ms;
             self.spare_rt_layer = rt_layer;
@@ -216,7 +216,7 @@ impl<'s> CpuRenderer<'s> {
             let mut g = self.spare_gbuffer.take().filter(|g| g.width == w && g.height == h).unwrap_or_else(|| GBuffer::new(w, h));
             trace::rt_only_gbuffer_into(&self.prepared, &self.bvh, camera, &mut g);
             if let Some(layer) = rt_layer {
-                raster::merge_rt_layer(&mut g, layer, camera);
+                depth_merge::merge_rt_layer(&mut g, layer, camera);
             }
             (g, trace::primary_ray_count(w, h))
         } else {

@@ -5,6 +5,7 @@ pub mod blend;
 pub mod bvh;
 pub mod camera_rays;
 pub mod capsule;
+pub mod depth_merge;
 pub mod frame;
 pub mod lighting;
 pub mod raster;

@@ -22,12 +22,14 @@
 //! band runs its triangles in scene order, and equal depths keep the earlier triangle.
 
 use glam::{BVec4A, DMat3, DVec3, Mat4, Vec3, Vec4};
-use hybrid_core::lanes::{V3, aos};
-use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
+use hybrid_core::buffers::BandRows;
+use hybrid_core::lanes::V3;
+use hybrid_core::{GBuffer, RT_SCENE_OBJECT, RtLayer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
 use crate::camera_rays::PrimaryRays;
+use crate::depth_merge::{layer_fits, rt_surface_with};
 use hybrid_core::prepare::{Plain4, PreparedScene, TriangleRef, TriangleSurface};
 
 /// Rows per band (the unit of parallel work and of binning).
@@ -70,7 +72,7 @@ const CLIP: u32 = CLIP_NEAR | CLIP_RIGHT | CLIP_LEFT | CLIP_TOP | CLIP_BOTTOM;
 ///
 /// `rt_layer` (paper 2, block U): where its depth is > 0 it is written into the depth buffer
 /// before any polygon; polygons win only where they are nearer (reversed-Z Greater). Pixels
-/// where it stays visible get [`RT_SCENE_OBJECT`] and [`rt_surface`]. A layer of another size
+/// where it stays visible get [`RT_SCENE_OBJECT`] and [`crate::depth_merge::rt_surface`]. A layer of another size
 /// is ignored (with a warning).
 pub fn rasterize(prepared: &PreparedScene, camera: &Camera, width: u32, height: u32, rt_layer: Option<&RtLayer>) -> GBuffer {
     let mut g = GBuffer::new(width, height);
@@ -82,68 +84,6 @@ pub fn rasterize(prepared: &PreparedScene, camera: &Camera, width: u32, height: 
 /// target is overwritten (mask cleared to 0), so a buffer can be reused frame after frame.
 pub fn rasterize_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLayer>, gbuffer: &mut GBuffer) {
     raster_into(prepared, camera, rt_layer, gbuffer, true);
-}
-
-/// Depth merge of the RT layer into a finished G-buffer (used where the G-buffer comes from
-/// primary rays, `rt-only`): wherever the layer's depth is Greater than the G-buffer's, the pixel
-/// becomes the RT-scene's ([`RT_SCENE_OBJECT`], [`rt_surface`]). Same result as passing the layer
-/// to [`rasterize`]. A layer of another size is ignored (with a warning).
-pub fn merge_rt_layer(gbuffer: &mut GBuffer, layer: &RtLayer, camera: &Camera) {
-    let (w, h) = (gbuffer.width, gbuffer.height);
-    if !layer_fits(layer, w, h) {
-        return;
-    }
-    let rays = PrimaryRays::new(camera, w, h);
-    // Runs of rows in parallel (each pixel is independent).
-    let band_len = w as usize * MERGE_ROWS;
-    split_bands(gbuffer, band_len).into_par_iter().enumerate().for_each(|(band, mut rows)| {
-        let base = band * band_len;
-        for k in 0..rows.len() {
-            let i = base + k;
-            let d = layer.depth[i];
-            if d > 0.0 && d > rows.depth[k] {
-                let (x, y) = ((i % w as usize) as u32, (i / w as usize) as u32);
-                let s = rt_surface_with(&rays, x, y, d, layer.color[i]);
-                rows.write(k, RT_SCENE_OBJECT, d, &s);
-            }
-        }
-    });
-}
-
-/// Rows per parallel task of [`merge_rt_layer`].
-const MERGE_ROWS: usize = 16;
-
-/// The G-buffer surface of an RT-layer pixel: emission = its colour (so deferred lighting
-/// reproduces it), no other reflectance, opaque, IOR 1; position = the pixel centre at `depth`
-/// unprojected with the inverse view-projection; normal = unit vector towards the camera.
-pub fn rt_surface(camera: &Camera, width: u32, height: u32, x: u32, y: u32, depth: f32, color: Vec3) -> Surface {
-    rt_surface_with(&PrimaryRays::new(camera, width, height), x, y, depth, color)
-}
-
-/// [`rt_surface`] with the frame's rays already set up.
-fn rt_surface_with(rays: &PrimaryRays, x: u32, y: u32, depth: f32, color: Vec3) -> Surface {
-    let position = rays.point_at_depth(x, y, depth);
-    Surface {
-        position,
-        normal: rays.towards_camera(position),
-        emission: color,
-        ambient: Vec3::ZERO,
-        diffuse: Vec3::ZERO,
-        opacity: 1.0,
-        specular: Vec3::ZERO,
-        shininess: 0.0,
-        reflectivity: 0.0,
-        ior: 1.0,
-    }
-}
-
-fn layer_fits(layer: &RtLayer, w: u32, h: u32) -> bool {
-    let n = w as usize * h as usize;
-    let ok = layer.width == w && layer.height == h && layer.depth.len() == n && layer.color.len() == n;
-    if !ok {
-        tracing::warn!(layer_w = layer.width, layer_h = layer.height, w, h, "RT layer size differs from the frame; ignored");
-    }
-    ok
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -648,120 +588,6 @@ fn covered_span(e: [i64; 3], step: [i64; 3], last: usize) -> Option<(usize, usiz
     (lo <= hi).then_some((lo as usize, hi as usize))
 }
 
-/// One band's rows of every G-buffer target (the band's slices of the frame's vectors).
-pub(crate) struct BandRows<'a> {
-    position: &'a mut [Vec3],
-    normal: &'a mut [Vec3],
-    emission: &'a mut [Vec3],
-    ambient: &'a mut [Vec3],
-    diffuse: &'a mut [Vec4],
-    specular: &'a mut [Vec4],
-    optical: &'a mut [Vec3],
-    object_id: &'a mut [u32],
-    mask: &'a mut [f32],
-    depth: &'a mut [f32],
-}
-
-impl BandRows<'_> {
-    /// Pixels in the band.
-    pub(crate) fn len(&self) -> usize {
-        self.depth.len()
-    }
-
-    pub(crate) fn set_mask(&mut self, i: usize, mask: f32) {
-        self.mask[i] = mask;
-    }
-
-    /// Exactly what [`GBuffer::write`] does, for a band's slices (a test checks they agree).
-    #[inline(always)]
-    pub(crate) fn write(&mut self, i: usize, object_id: u32, depth: f32, s: &Surface) {
-        self.position[i] = s.position;
-        self.normal[i] = s.normal;
-        self.emission[i] = s.emission;
-        self.ambient[i] = s.ambient;
-        self.diffuse[i] = s.diffuse.extend(s.opacity);
-        self.specular[i] = s.specular.extend(s.shininess);
-        self.optical[i] = Vec3::new(s.reflectivity, s.ior, s.opacity);
-        self.object_id[i] = object_id;
-        self.depth[i] = depth;
-    }
-
-    /// [`Self::write`] of the four surfaces of `s` at pixels `i..i + 4`.
-    #[inline(always)]
-    fn write4(&mut self, i: usize, object_id: u32, depth: &[f32], s: &Plain4) {
-        let c = &s.constant;
-        let r = i..i + 4;
-        self.position[r.clone()].copy_from_slice(&aos(s.position));
-        self.normal[r.clone()].copy_from_slice(&aos(s.normal));
-        self.emission[r.clone()].fill(c.emission);
-        self.ambient[r.clone()].fill(c.ambient);
-        for (d, v) in self.diffuse[r.clone()].iter_mut().zip(aos(s.diffuse)) {
-            *d = v.extend(c.opacity);
-        }
-        self.specular[r.clone()].fill(c.specular.extend(c.shininess));
-        self.optical[r.clone()].fill(Vec3::new(c.reflectivity, c.ior, c.opacity));
-        self.object_id[r.clone()].fill(object_id);
-        self.depth[r].copy_from_slice(depth);
-    }
-
-    /// What [`GBuffer::new`] holds in a pixel (a test checks they agree).
-    #[inline]
-    pub(crate) fn clear(&mut self, i: usize) {
-        self.position[i] = Vec3::ZERO;
-        self.normal[i] = Vec3::ZERO;
-        self.emission[i] = Vec3::ZERO;
-        self.ambient[i] = Vec3::ZERO;
-        self.diffuse[i] = Vec4::ZERO;
-        self.specular[i] = Vec4::ZERO;
-        self.optical[i] = Vec3::ZERO;
-        self.object_id[i] = NO_OBJECT;
-        self.mask[i] = 0.0;
-        self.depth[i] = 0.0;
-    }
-}
-
-/// The G-buffer's targets cut into runs of `band_len` pixels, one [`BandRows`] each, to be
-/// written in parallel.
-pub(crate) fn split_bands(g: &mut GBuffer, band_len: usize) -> Vec<BandRows<'_>> {
-    let mut position = g.position.chunks_mut(band_len);
-    let mut normal = g.normal.chunks_mut(band_len);
-    let mut emission = g.emission.chunks_mut(band_len);
-    let mut ambient = g.ambient.chunks_mut(band_len);
-    let mut diffuse = g.diffuse.chunks_mut(band_len);
-    let mut specular = g.specular.chunks_mut(band_len);
-    let mut optical = g.optical.chunks_mut(band_len);
-    let mut object_id = g.object_id.chunks_mut(band_len);
-    let mut mask = g.mask.chunks_mut(band_len);
-    let mut depth = g.depth.chunks_mut(band_len);
-    let mut out = Vec::new();
-    while let (
-        Some(position),
-        Some(normal),
-        Some(emission),
-        Some(ambient),
-        Some(diffuse),
-        Some(specular),
-        Some(optical),
-        Some(object_id),
-        Some(mask),
-        Some(depth),
-    ) = (
-        position.next(),
-        normal.next(),
-        emission.next(),
-        ambient.next(),
-        diffuse.next(),
-        specular.next(),
-        optical.next(),
-        object_id.next(),
-        mask.next(),
-        depth.next(),
-    ) {
-        out.push(BandRows { position, normal, emission, ambient, diffuse, specular, optical, object_id, mask, depth });
-    }
-    out
-}
-
 fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLayer>, g: &mut GBuffer, clear: bool) {
     let (width, height) = (g.width, g.height);
     let n = g.len();
@@ -823,7 +649,7 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     let rays = PrimaryRays::new(camera, width, height);
     let w = width as usize;
     let band_len = w * BAND_ROWS as usize;
-    let rows = split_bands(g, band_len);
+    let rows = g.bands_mut(band_len);
     let ctx = BandContext { prepared, chunks, rt_layer, rays: &rays, width, height, clear };
     rows.into_par_iter()
         .enumerate()
@@ -1365,7 +1191,7 @@ mod tests {
                         a.write((y * w + x) as usize, 7, 0.5, &shade(&st, &ts, x, y));
                     }
                     let depth = vec![0.5f32; (w * h) as usize];
-                    let mut rows = split_bands(&mut b, (w * h) as usize);
+                    let mut rows = b.bands_mut((w * h) as usize);
                     let px = Pixels { out: &mut rows[0], row_base: (y * w) as usize, depth: &depth, object: 7, clear: false };
                     shade_run(&st, &ts, x0, x1, y, px);
                 }
@@ -1440,7 +1266,7 @@ mod tests {
         let mut b = GBuffer::new(3, 2);
         b.mask.iter_mut().for_each(|m| *m = 1.0);
         {
-            let mut rows = split_bands(&mut b, 6);
+            let mut rows = b.bands_mut(6);
             rows[0].write(4, 7, 0.5, &s);
             for i in [0, 1, 2, 3, 5] {
                 rows[0].clear(i);

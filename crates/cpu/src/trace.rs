@@ -37,7 +37,6 @@ use rayon::prelude::*;
 use crate::bvh::{SceneBvh, ShadowCache};
 use crate::camera_rays::PrimaryRays;
 use crate::capsule::PointCloudCapsule;
-use crate::raster::split_bands;
 use hybrid_core::prepare::PreparedScene;
 
 pub use hybrid_core::report::RayCounts;
@@ -302,7 +301,7 @@ pub fn rt_only_gbuffer_into(prepared: &PreparedScene, bvh: &SceneBvh, camera: &C
     let rays = PrimaryRays::new(camera, width, height);
     let vp = camera.view_projection(width as f32 / height as f32);
     let band_len = width as usize * PRIMARY_BAND_ROWS;
-    split_bands(g, band_len).into_par_iter().enumerate().with_max_len(1).for_each(|(band, mut rows)| {
+    g.bands_mut(band_len).into_par_iter().enumerate().with_max_len(1).for_each(|(band, mut rows)| {
         for k in 0..rows.len() {
             let i = band * band_len + k;
             let (x, y) = ((i % width as usize) as u32, (i / width as usize) as u32);

@@ -12,7 +12,7 @@ use hybrid_core::PreparedScene;
 use hybrid_core::depth_merge::{PackedRtFrame, unpack, unpack_texel};
 use hybrid_cpu::camera_rays::RayGen;
 use hybrid_cpu::capsule::{CapsuleRequest, PointCloudCapsule, render_sync};
-use hybrid_cpu::raster::merge_rt_layer;
+use hybrid_cpu::depth_merge::merge_rt_layer;
 use hybrid_cpu::spheres::SphereBvh;
 use hybrid_gpu::GpuContext;
 use hybrid_gpu::capsule::GpuCapsule;
