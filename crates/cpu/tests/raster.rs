@@ -4,8 +4,8 @@ use glam::{Vec2, Vec3};
 use hybrid_core::PreparedScene;
 use hybrid_core::{GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer};
 use hybrid_cpu::camera_rays::{ViewRays, primary_ray};
-use hybrid_cpu::lighting::deferred_lighting;
 use hybrid_cpu::depth_merge::merge_rt_layer;
+use hybrid_cpu::lighting::deferred_lighting;
 use hybrid_cpu::raster::{rasterize, rasterize_into};
 use hybrid_scene::{Attenuation, Camera, ColorSpace, Environment, Lights, Material, Mesh, PointLight, Projection, Scene, Skybox, Texture};
 

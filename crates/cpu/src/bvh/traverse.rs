@@ -1,0 +1,226 @@
+//! The BVH's traversals: ordered closest-hit (nearest child first) and the unordered pack walk
+//! that shadow rays use.
+
+use super::*;
+
+impl SceneBvh {
+    /// The closest triangle hit with `t_min < t < t_max` along `origin + t·dir`.
+    pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
+        if self.nodes.is_empty() {
+            return None;
+        }
+        HIT_STACK.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut stack) => self.closest_hit_with(&mut stack, origin, dir, t_min, t_max),
+            Err(_) => self.closest_hit_with(&mut [0; STACK_LEN], origin, dir, t_min, t_max),
+        })
+    }
+
+    pub(super) fn closest_hit_with(&self, stack: &mut [u64; STACK_LEN], origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
+        let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
+        let mut best_t = t_max;
+        let mut best = usize::MAX;
+        let mut best_uv = (0.0f32, 0.0f32);
+        // Entries still to visit are `stack[..sp]`, indexed modulo the power-of-two length (no
+        // bounds check; it cannot fill, see `STACK_LEN`).
+        const WRAP: usize = STACK_LEN - 1;
+        let mut sp = 0usize;
+        let mut cur = 0u32;
+        loop {
+            if cur & LEAF == 0 {
+                let n = &self.nodes[cur as usize];
+                let (near, mask) = node_hits(n, &r, t_min, best_t);
+                if mask != 0 {
+                    if mask & (mask - 1) == 0 {
+                        cur = n.child[mask.trailing_zeros() as usize & 3];
+                        continue;
+                    }
+                    // Several children: sort them by entry distance (farthest first) with a
+                    // branch-free sorting network on `distance bits << 32 | child` keys (entry
+                    // distances are ≥ t_min ≥ 0 for the rays we trace, so their bits order like
+                    // the floats; a wrong order would only cost time); stack all but the
+                    // nearest, visit that one. Children missed get key 0, also without a
+                    // branch (a hit's key is never 0: the root, node 0, is nobody's child).
+                    let near = near.to_array();
+                    let key = |c: usize| ((near[c].to_bits() as u64) << 32 | n.child[c] as u64) & (u64::from(mask >> c & 1)).wrapping_neg();
+                    let mut k = [key(0), key(1), key(2), key(3)];
+                    let mut swap = |a: usize, b: usize| {
+                        let (x, y) = (k[a], k[b]);
+                        k[a] = x.max(y);
+                        k[b] = x.min(y);
+                    };
+                    swap(0, 1);
+                    swap(2, 3);
+                    swap(0, 2);
+                    swap(1, 3);
+                    swap(1, 2);
+                    let hits = mask.count_ones() as usize;
+                    // All three written, the stack grown by the hits but the nearest.
+                    debug_assert!(sp + 3 <= STACK_LEN, "closest-hit stack overflow");
+                    for (j, &key) in k[..3].iter().enumerate() {
+                        stack[(sp + j) & WRAP] = key;
+                    }
+                    sp += hits - 1;
+                    cur = k[(hits - 1) & 3] as u32;
+                    continue;
+                }
+            } else {
+                let range = leaf_packs(cur);
+                let first = range.start;
+                for (pi, pack) in self.packs[range].iter().enumerate() {
+                    let (t, u, v, mut mask) = intersect4(pack, &r, t_min, best_t);
+                    if mask != 0 {
+                        let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
+                        while mask != 0 {
+                            let lane = mask.trailing_zeros() as usize & 3;
+                            mask &= mask - 1;
+                            if t[lane] < best_t {
+                                best_t = t[lane];
+                                best = (first + pi) * 4 + lane;
+                                best_uv = (u[lane], v[lane]);
+                            }
+                        }
+                    }
+                }
+            }
+            // Pop the next entry that starts before the closest hit so far.
+            loop {
+                if sp == 0 {
+                    return (best != usize::MAX).then(|| Hit {
+                        t: best_t,
+                        triangle: self.slot_ref[best],
+                        bary: Vec3::new(1.0 - best_uv.0 - best_uv.1, best_uv.0, best_uv.1),
+                    });
+                }
+                sp -= 1;
+                let key = stack[sp & WRAP];
+                if f32::from_bits((key >> 32) as u32) <= best_t {
+                    cur = key as u32;
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Whether a triangle whose material casts shadows and is not fully transparent is hit
+    /// with `t_min < t < t_max`.
+    pub fn occluded(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
+        let mut hit = false;
+        self.for_each_pack_hit(origin, dir, t_min, t_max, |_, _, _, _, _| {
+            hit = true;
+            false
+        });
+        hit
+    }
+
+    /// Calls `f(leaf reference, first slot of the pack, mask, u, v)` for every pack with triangles hit on the
+    /// segment that can block light, in no particular order, until `f` returns false. `mask`
+    /// bits 0–3 are the lanes hit (triangles that cast shadows, transparency < 1); bits 4–7
+    /// are set instead (bits 0–3 clear) when one of the lanes hit is opaque.
+    #[inline]
+    pub(super) fn for_each_pack_hit(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        self.for_each_pack_hit_with(&RayPre::new(Vec3A::from(origin), Vec3A::from(dir)), t_min, t_max, f)
+    }
+
+    #[inline(always)]
+    pub(super) fn for_each_pack_hit_with(
+        &self,
+        r: &RayPre,
+        t_min: f32,
+        t_max: f32,
+        mut f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
+    ) {
+        // The nodes still to visit are `stack[..sp]`: a fixed array indexed modulo its
+        // power-of-two length, so that no bounds or capacity check sits in the loop (a `Vec`'s
+        // push and pop were measurably slower). It cannot fill: see `STACK_LEN`.
+        let mut stack = [0u32; STACK_LEN];
+        const WRAP: usize = STACK_LEN - 1;
+        let mut sp = 0usize;
+        let mut cur = 0u32;
+        loop {
+            if cur & LEAF == 0 {
+                let n = &self.nodes[cur as usize];
+                let (_, mut mask) = node_hits(n, r, t_min, t_max);
+                if mask != 0 {
+                    cur = n.child[mask.trailing_zeros() as usize & 3];
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        debug_assert!(sp < STACK_LEN, "any-hit stack overflow");
+                        stack[sp & WRAP] = n.child[mask.trailing_zeros() as usize & 3];
+                        sp += 1;
+                        mask &= mask - 1;
+                    }
+                    continue;
+                }
+            } else {
+                let range = leaf_packs(cur);
+                let first = range.start;
+                for (k, (pack, &shadow)) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]).enumerate() {
+                    let (_, u, v, hit) = intersect4(pack, r, t_min, t_max);
+                    let hit = hit & shadow as u32 & 15;
+                    if hit != 0 {
+                        let opaque = hit & (shadow as u32 >> 4);
+                        let mask = if opaque != 0 { opaque << 4 } else { hit };
+                        if !f(cur, (first + k) * 4, mask, u.to_array(), v.to_array()) {
+                            return;
+                        }
+                    }
+                }
+            }
+            if sp == 0 {
+                return;
+            }
+            sp -= 1;
+            cur = stack[sp & WRAP];
+        }
+    }
+}
+
+/// Length of the traversal stacks (a power of two). A 4-wide node stacks at most three
+/// children, and a path is at most `MAX_DEPTH` (56) nodes deep plus the ≤ 8 levels
+/// `Packer::leaf` adds above an oversized leaf, so at most 192 entries are ever stacked.
+pub(super) const STACK_LEN: usize = 256;
+
+thread_local! {
+    /// Per-thread closest-hit traversal stack, reused from ray to ray (its 64-bit entries
+    /// would make a large array to zero for every ray).
+    static HIT_STACK: std::cell::RefCell<[u64; STACK_LEN]> = const { std::cell::RefCell::new([0; STACK_LEN]) };
+}
+
+/// Möller–Trumbore on four triangles: `(t, u, v, mask of lanes hit with t_min < t < t_max)`;
+/// `u`/`v` are the weights of corners 1/2.
+#[inline(always)]
+pub(super) fn intersect4(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, Vec4, Vec4, u32) {
+    let [dx, dy, dz] = r.d;
+    let [e1x, e1y, e1z] = p.e1;
+    let [e2x, e2y, e2z] = p.e2;
+    // p = d × e2
+    let px = dy * e2z - dz * e2y;
+    let py = dz * e2x - dx * e2z;
+    let pz = dx * e2y - dy * e2x;
+    let det = e1x * px + e1y * py + e1z * pz;
+    let inv_det = det.recip();
+    let sx = r.o[0] - p.v0[0];
+    let sy = r.o[1] - p.v0[1];
+    let sz = r.o[2] - p.v0[2];
+    let u = (sx * px + sy * py + sz * pz) * inv_det;
+    // q = s × e1
+    let qx = sy * e1z - sz * e1y;
+    let qy = sz * e1x - sx * e1z;
+    let qz = sx * e1y - sy * e1x;
+    let v = (dx * qx + dy * qy + dz * qz) * inv_det;
+    let t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
+    // NaN lanes (degenerate or unused triangles) fail every comparison.
+    let hit =
+        u.cmpge(Vec4::ZERO) & v.cmpge(Vec4::ZERO) & (u + v).cmple(Vec4::ONE) & t.cmpgt(Vec4::splat(t_min)) & t.cmplt(Vec4::splat(t_max));
+    (t, u, v, hit.bitmask())
+}
