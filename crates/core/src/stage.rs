@@ -168,3 +168,69 @@ impl HeuristicStage {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hybrid_scene::{Budget, HeuristicSettings, demo_scene};
+
+    fn stage_for(budget: Budget) -> HeuristicStage {
+        HeuristicStage::new(Heuristic::new(HeuristicSettings { budget, ..HeuristicSettings::default() }))
+    }
+
+    #[test]
+    fn stage_names_are_the_report_keys() {
+        let json = serde_json::to_value(StageTimings::default()).unwrap();
+        for stage in Stage::ALL {
+            assert!(json.get(stage.name()).is_some(), "{stage} is not a key of the report's timings");
+            let mut t = StageTimings::default();
+            t[stage] = 7.0;
+            assert_eq!(serde_json::to_value(t).unwrap()[stage.name()], 7.0);
+        }
+    }
+
+    #[test]
+    fn raster_and_rt_only_choose_without_counting() {
+        let scene = demo_scene();
+        let prepared = PreparedScene::new(&scene);
+        let mut stage = stage_for(Budget::Cost(0.0));
+        let never = || -> Result<Vec<u64>, ()> { panic!("pixels counted") };
+        assert!(matches!(stage.choose(&prepared, &scene.camera, (64, 36), Mode::Raster, never), Ok(MaskChoice::Nothing)));
+        assert!(matches!(stage.choose(&prepared, &scene.camera, (64, 36), Mode::RtOnly, never), Ok(MaskChoice::AllCovered)));
+    }
+
+    #[test]
+    fn all_selects_every_visible_object_whatever_the_budget_and_hybrid_keeps_to_it() {
+        let scene = demo_scene();
+        let prepared = PreparedScene::new(&scene);
+        let n = scene.objects.len();
+        // Every object visible but the last.
+        let areas: Vec<u64> = (0..n as u64).map(|i| if i + 1 == n as u64 { 0 } else { 100 + i }).collect();
+        let count = || Ok::<_, ()>(areas.clone());
+        let mut stage = stage_for(Budget::Cost(0.0));
+        let all = stage.choose(&prepared, &scene.camera, (64, 36), Mode::All, count).unwrap();
+        let want: Vec<bool> = areas.iter().map(|&a| a > 0).collect();
+        assert_eq!(all.selected(), Some(&want[..]));
+        // The budget is untouched by `all`: hybrid with a zero budget selects nothing.
+        let hybrid = stage.choose(&prepared, &scene.camera, (64, 36), Mode::Hybrid, count).unwrap();
+        assert_eq!(hybrid.selected(), Some(&vec![false; n][..]));
+        assert_eq!(hybrid.into_report().map(|r| r.spent), Some(0.0));
+    }
+
+    #[test]
+    fn only_hybrid_frames_calibrate_the_ms_budget() {
+        let scene = demo_scene();
+        let prepared = PreparedScene::new(&scene);
+        let areas = vec![1000u64; scene.objects.len()];
+        let mut stage = stage_for(Budget::Millis(1.0));
+        let choice = stage.choose(&prepared, &scene.camera, (64, 36), Mode::All, || Ok::<_, ()>(areas.clone())).unwrap();
+        let report = choice.into_report();
+        stage.record_trace(Mode::All, report.as_ref(), 5.0);
+        assert_eq!(stage.heuristic().ms_per_cost(), None);
+        let choice = stage.choose(&prepared, &scene.camera, (64, 36), Mode::Hybrid, || Ok::<_, ()>(areas.clone())).unwrap();
+        let report = choice.into_report();
+        assert!(report.as_ref().is_some_and(|r| r.spent > 0.0), "the first ms-budget frame traces something to measure");
+        stage.record_trace(Mode::Hybrid, report.as_ref(), 5.0);
+        assert!(stage.heuristic().ms_per_cost().is_some_and(|m| m > 0.0));
+    }
+}
