@@ -1,0 +1,302 @@
+//! `hybrid bench`: the paper's two sets of tests (Walewski et al. 2019, §4–5) on one scene, with
+//! image quality.
+//!
+//! - **Static set** (Table 5): `--frames` frames after 2 warm-up frames at the scene's camera, for
+//!   every mode of `--modes`: mean and p95 of every stage and of the frame.
+//! - **Path set** (Table 6): the scene's camera path sampled at `--fps` frames per second of path
+//!   time for `--path-seconds` seconds, every frame rendered as fast as possible, for every mode
+//!   of `--modes` but `rt-only`. `rt-only` is rendered on every `--flip-every`-th path frame as the
+//!   reference of the mean FLIP error (and timed there). Selection churn: per frame, the number of
+//!   visible objects whose selection differs from the previous frame's (the heuristic's S).
+//! - **Budget sweep** (`--sweep-budget`): the path (or the static camera when the scene has no
+//!   path) at fractions of the all-selected cost, for both policies: FLIP against frame time.
+//!
+//! Every renderer is built fresh for each pass, so the heuristic's state (S, ms per cost) of one
+//! pass never leaks into another. Each pass starts with 2 warm-up frames at its first camera.
+
+mod output;
+mod passes;
+mod plan;
+mod plot;
+mod stats;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use hybrid_core::report::{FrameReport, StageTimings};
+use hybrid_core::{FrameSettings, Mode};
+use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene};
+use serde::Serialize;
+use serde_json::json;
+
+use self::plot::{Chart, HLine, Series, write_chart};
+use crate::CliError;
+use crate::args::BenchArgs;
+use crate::output::{ensure_dir, write_bytes};
+use crate::render::{AnyRenderer, Backend, RenderOptions, choose_backend};
+
+/// Warm-up frames rendered (and discarded) at the start of every pass.
+pub const WARMUP_FRAMES: usize = 2;
+/// Path seconds rendered when `--path-seconds` is not given (the paper's traversal), or the whole
+/// path when it is shorter.
+pub const DEFAULT_PATH_SECONDS: f32 = 20.0;
+/// Budget sweep: fractions of the mean all-selected cost.
+pub const SWEEP_FRACTIONS: [f64; 5] = [0.1, 0.25, 0.5, 0.75, 1.0];
+/// A millisecond budget is "hit" when the trace stage lands within this fraction of the target.
+pub const BUDGET_TOLERANCE: f64 = 0.1;
+
+use self::output::*;
+use self::passes::*;
+use self::plan::*;
+use self::stats::*;
+
+pub fn run(args: BenchArgs) -> Result<(), CliError> {
+    check_args(&args)?;
+    let name = args.scene.display().to_string();
+    let mut scene = load_scene(&args.scene)?;
+    args.heuristic.apply(&mut scene.heuristic);
+    let plan = plan(&args, &scene, &name)?;
+    let backend = choose_backend(args.backend, args.quiet)?;
+    let backend_name = match &backend {
+        Backend::Cpu => "cpu".to_string(),
+        Backend::Gpu(ctx) => format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend),
+    };
+    // Everything is checked: now the output folder (created and probed before any rendering).
+    ensure_dir(&args.out)?;
+    if let Some(n) = args.threads {
+        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
+    }
+
+    let machine_start = load_average();
+    let options = RenderOptions::from(&args.capsule);
+    let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options };
+    let mut modes: Vec<Mode> = Vec::new();
+    for m in &args.modes {
+        if !modes.contains(m) {
+            modes.push(*m);
+        }
+    }
+    if !args.quiet {
+        eprintln!(
+            "bench {name}: {}x{}, {} static frames, modes {}",
+            args.size.0,
+            args.size.1,
+            args.frames,
+            modes.iter().map(|m| m.name()).collect::<Vec<_>>().join(",")
+        );
+    }
+
+    // Static set: the scene's camera; FLIP of the last frame against rt-only's last frame.
+    let static_shots = vec![Shot { time: None, camera: scene.camera }; args.frames as usize];
+    let last = static_shots.len() - 1;
+    let mut static_passes: Vec<(Mode, Pass)> = Vec::new();
+    for &mode in &modes {
+        static_passes.push((mode, bench.pass(&scene, "static", mode, &static_shots, &|i| i == last)?));
+    }
+    let static_reference = match static_passes.iter().find(|(m, _)| *m == Mode::RtOnly) {
+        Some((_, p)) => p.images.clone(),
+        None if args.sweep_budget && plan.path_shots.is_none() => {
+            bench.pass(&scene, "static", Mode::RtOnly, &static_shots[..1], &|_| true)?.images.into_values().map(|v| (last, v)).collect()
+        }
+        None => BTreeMap::new(),
+    };
+    for (_, pass) in &mut static_passes {
+        bench.add_flip(pass, &static_reference);
+    }
+
+    // Path set.
+    let k = args.flip_every as usize;
+    let mut path_passes: Vec<(Mode, Pass)> = Vec::new();
+    let mut path_reference = BTreeMap::new();
+    if let Some(shots) = &plan.path_shots {
+        let flip_frames: Vec<Shot> = shots.iter().step_by(k).copied().collect();
+        let mut reference = bench.pass(&scene, "path", Mode::RtOnly, &flip_frames, &|_| true)?;
+        // Re-index the reference frames by their path frame index.
+        for (j, r) in reference.records.iter_mut().enumerate() {
+            r.frame = j * k;
+        }
+        path_reference = reference.images.iter().map(|(j, img)| (j * k, img.clone())).collect();
+        reference.images.clear();
+        for &mode in modes.iter().filter(|m| **m != Mode::RtOnly) {
+            let mut pass = bench.pass(&scene, "path", mode, shots, &|i| i.is_multiple_of(k))?;
+            bench.add_flip(&mut pass, &path_reference);
+            pass.images.clear();
+            path_passes.push((mode, pass));
+        }
+        if modes.contains(&Mode::RtOnly) {
+            path_passes.push((Mode::RtOnly, reference));
+        }
+    }
+
+    // Budget sweep.
+    let mut sweep: Vec<SweepPoint> = Vec::new();
+    if args.sweep_budget {
+        let on_path = plan.path_shots.is_some();
+        let shots: &[Shot] = plan.path_shots.as_deref().unwrap_or(&static_shots);
+        let reference = if on_path { &path_reference } else { &static_reference };
+        let set_passes = if on_path { &path_passes } else { &static_passes };
+        let all_cost = set_passes
+            .iter()
+            .filter(|(m, _)| matches!(m, Mode::Hybrid | Mode::All))
+            .find_map(|(_, p)| mean(p.records.iter().filter_map(|r| r.all_cost)))
+            .unwrap_or(0.0);
+        let keep_every = if plan.path_shots.is_some() { k } else { shots.len() };
+        let original = scene.heuristic.clone();
+        for policy in [Policy::Paper, Policy::Knapsack] {
+            for fraction in SWEEP_FRACTIONS {
+                let budget = fraction * all_cost;
+                scene.heuristic.policy = policy;
+                scene.heuristic.budget = Budget::Cost(budget);
+                let keep = |i: usize| if keep_every == shots.len() { i == last } else { i.is_multiple_of(keep_every) };
+                let mut pass = bench.pass(&scene, "sweep", Mode::Hybrid, shots, &keep)?;
+                bench.add_flip(&mut pass, reference);
+                let recs: Vec<&FrameRecord> = pass.records.iter().collect();
+                let frame = stat(&recs.iter().map(|r| r.timings.frame).collect::<Vec<_>>());
+                sweep.push(SweepPoint {
+                    policy: policy_name(policy),
+                    fraction,
+                    budget,
+                    frames: recs.len(),
+                    mean_frame_ms: frame.mean,
+                    p95_frame_ms: frame.p95,
+                    mean_trace_ms: mean(recs.iter().map(|r| r.timings.trace)).unwrap_or(0.0),
+                    mean_flip: mean(recs.iter().filter_map(|r| r.flip.map(f64::from))),
+                    mean_churn: mean(recs.iter().filter_map(|r| r.churn.map(|c| c as f64))),
+                });
+            }
+        }
+        scene.heuristic = original;
+    }
+
+    // Summaries.
+    let static_summary: BTreeMap<String, StaticSummary> = static_passes
+        .iter()
+        .map(|(m, p)| {
+            let recs: Vec<&FrameRecord> = p.records.iter().collect();
+            let flip_vs_rt_only = p.records.iter().find_map(|r| r.flip);
+            (m.name().to_string(), StaticSummary { frames: recs.len(), stages: stage_stats(&recs), flip_vs_rt_only })
+        })
+        .collect();
+    let path_summary: BTreeMap<String, PathSummary> =
+        path_passes.iter().map(|(m, p)| (m.name().to_string(), path_summary(&p.records.iter().collect::<Vec<_>>()))).collect();
+    let threads = rayon::current_num_threads();
+    let machine = Machine {
+        backend: backend_name,
+        cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        threads,
+        cpu_model: cpu_model(),
+        load_average_start: machine_start,
+        load_average_end: load_average(),
+        git_head: git_commit(args.scene.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."))),
+    };
+    let budget_desc = match scene.heuristic.budget {
+        Budget::Unlimited => json!(null),
+        Budget::Cost(c) => json!({ "cost": c }),
+        Budget::Millis(ms) => json!({ "ms": ms }),
+    };
+    let report = json!({
+        "scene": name,
+        "size": [args.size.0, args.size.1],
+        "settings": {
+            "frames": args.frames,
+            "warmup_frames": WARMUP_FRAMES,
+            "path_seconds": plan.path_seconds,
+            "fps": args.fps,
+            "flip_every": args.flip_every,
+            "modes": modes.iter().map(|m| m.name()).collect::<Vec<_>>(),
+            "budget": budget_desc,
+            "policy": policy_name(scene.heuristic.policy),
+            "importance": scene.heuristic.importance,
+            "clip_capsule": options.clip_capsule,
+            "sphere_effects": options.sphere_effects,
+            "capsule_visibility": options.capsule_visibility.name(),
+        },
+        "machine": machine,
+        "static": static_summary,
+        "path": path_summary,
+        "sweep": if args.sweep_budget { json!(sweep) } else { json!(null) },
+    });
+
+    // Outputs (each written atomically).
+    let out: &Path = &args.out;
+    let json_bytes = serde_json::to_vec_pretty(&report).map_err(|e| CliError::failure(e.to_string()))?;
+    write_bytes(&out.join("bench.json"), &json_bytes)?;
+    let all_records = static_passes.iter().chain(&path_passes).flat_map(|(_, p)| &p.records);
+    write_bytes(&out.join("frames.csv"), frames_csv(all_records).as_bytes())?;
+    write_chart(&out.join("frame_times.png"), &frame_time_chart(&name, &static_passes, &path_passes, &scene))?;
+    if args.sweep_budget {
+        write_bytes(&out.join("sweep.csv"), sweep_csv(&sweep).as_bytes())?;
+        write_chart(&out.join("sweep.png"), &sweep_chart(&name, &sweep))?;
+    }
+    print!(
+        "{}",
+        markdown(&name, &args, &machine, &static_summary, &path_summary, &sweep, scene.point_clouds.is_empty(), plan.path_seconds)
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats() {
+        let v: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(stat(&v), Stat { mean: 50.5, p95: 95.0 });
+        assert_eq!(stat(&[3.0]), Stat { mean: 3.0, p95: 3.0 });
+        assert_eq!(stat(&[2.0, 1.0]), Stat { mean: 1.5, p95: 2.0 });
+        assert_eq!(stat(&[]), Stat::default());
+        assert_eq!(mean([1.0, 2.0].into_iter()), Some(1.5));
+        assert_eq!(mean(std::iter::empty()), None);
+    }
+
+    fn record(trace: f64, budget_ms: Option<f64>, visible: usize, selected: usize, churn: usize) -> FrameRecord {
+        FrameRecord {
+            set: "path",
+            mode: Mode::Hybrid,
+            frame: 0,
+            time_s: Some(0.0),
+            timings: StageTimings { trace, frame: trace + 1.0, ..Default::default() },
+            spent: Some(1.0),
+            budget: None,
+            budget_ms,
+            all_cost: Some(2.0),
+            visible: Some(visible),
+            selected: Some(selected),
+            churn: Some(churn),
+            flip: None,
+        }
+    }
+
+    #[test]
+    fn budget_hit_rate_counts_frames_near_the_target_or_unbound() {
+        let recs = [
+            record(10.0, Some(10.0), 3, 2, 0), // on target
+            record(10.9, Some(10.0), 3, 2, 1), // within +10%
+            record(12.0, Some(10.0), 3, 2, 3), // over
+            record(5.0, Some(10.0), 3, 2, 0),  // under, budget binding: a miss
+            record(5.0, Some(10.0), 3, 3, 0),  // under, everything selected: fine
+        ];
+        let s = path_summary(&recs.iter().collect::<Vec<_>>());
+        assert_eq!(s.budget_hit_rate, Some(3.0 / 5.0));
+        assert_eq!(s.budget_over_rate, Some(1.0 / 5.0));
+        assert_eq!(s.mean_churn, Some(0.8));
+        assert_eq!(s.max_churn, Some(3));
+        let no_ms = [record(5.0, None, 1, 1, 0)];
+        assert_eq!(path_summary(&no_ms.iter().collect::<Vec<_>>()).budget_hit_rate, None);
+    }
+
+    #[test]
+    fn csv_rows_have_every_column() {
+        let mut r = record(1.0, None, 2, 1, 1);
+        r.flip = Some(0.0123);
+        let csv = frames_csv([&r].into_iter());
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 2);
+        let cols = FRAMES_CSV_HEADER.split(',').count();
+        assert_eq!(lines[1].split(',').count(), cols);
+        assert!(lines[1].starts_with("path,hybrid,0,0,2.000,"));
+        assert!(lines[1].ends_with(",0.01230"));
+    }
+}
