@@ -169,6 +169,9 @@ struct App<'s> {
     last_frame: Instant,
     frames: u64,
     frame_ms_sum: f64,
+    /// The last frame's render + present time (ms) and rendered size.
+    last_ms: f64,
+    last_size: (u32, u32),
     screenshots: u32,
     error: Option<ViewError>,
 }
@@ -197,6 +200,8 @@ impl<'s> App<'s> {
             last_frame: Instant::now(),
             frames: 0,
             frame_ms_sum: 0.0,
+            last_ms: 0.0,
+            last_size: (0, 0),
             screenshots: 0,
             error: None,
         }
@@ -420,10 +425,13 @@ impl<'s> App<'s> {
                 Event::PrintFrame => {
                     let s = self.state.as_ref().map_or("none".to_string(), |s| s.backend_name.clone());
                     println!(
-                        "frame: backend {s} scale {:.3} frames {} mean frame {:.2} ms",
+                        "frame: backend {s} scale {:.3} frames {} mean frame {:.2} ms last frame {:.2} ms at {}x{}",
                         self.scale,
                         self.frames,
-                        self.frame_ms_sum / self.frames.max(1) as f64
+                        self.frame_ms_sum / self.frames.max(1) as f64,
+                        self.last_ms,
+                        self.last_size.0,
+                        self.last_size.1
                     );
                 }
                 Event::PrintMemory => {
@@ -477,6 +485,7 @@ impl<'s> App<'s> {
                     return;
                 }
                 self.dirty = false;
+                self.last_size = (w, h);
                 match r.targets() {
                     Some(t) => t.final_image.view.clone(),
                     None => return,
@@ -503,6 +512,7 @@ impl<'s> App<'s> {
                         u.write(&state.queue, frame.buffers.final_srgb.as_flattened());
                     }
                     r.recycle(frame);
+                    self.last_size = (fw, fh);
                     self.coarse = s < 1.0;
                     self.dirty = false;
                 }
@@ -535,7 +545,8 @@ impl<'s> App<'s> {
         state.queue.submit([enc.finish()]);
         state.queue.present(surface_texture);
         self.frames += 1;
-        self.frame_ms_sum += render_start.elapsed().as_secs_f64() * 1e3;
+        self.last_ms = render_start.elapsed().as_secs_f64() * 1e3;
+        self.frame_ms_sum += self.last_ms;
         let cpu_refining = matches!(state.renderer, Renderer::Cpu(_)) && (self.coarse || self.dirty);
         if scripted || moving || cpu_refining {
             state.window.request_redraw();
@@ -605,17 +616,15 @@ impl ApplicationHandler for App<'_> {
                 self.looking = state == ElementState::Pressed;
                 self.last_cursor = None;
             }
-            WindowEvent::CursorMoved { position, .. } => {
-                if self.looking {
-                    if let Some((x, y)) = self.last_cursor {
-                        self.fly.look((position.x - x) as f32, (position.y - y) as f32);
-                        self.dirty = true;
-                        if let Some(s) = &self.state {
-                            s.window.request_redraw();
-                        }
+            WindowEvent::CursorMoved { position, .. } if self.looking => {
+                if let Some((x, y)) = self.last_cursor {
+                    self.fly.look((position.x - x) as f32, (position.y - y) as f32);
+                    self.dirty = true;
+                    if let Some(s) = &self.state {
+                        s.window.request_redraw();
                     }
-                    self.last_cursor = Some((position.x, position.y));
                 }
+                self.last_cursor = Some((position.x, position.y));
             }
             WindowEvent::MouseWheel { delta, .. } => {
                 let notches = match delta {

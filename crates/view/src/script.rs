@@ -13,7 +13,7 @@
 //! screenshot PATH     # the frame at full window size (no overlay) as PNG, report JSON beside it
 //! print-camera        # prints `camera: position X Y Z target X Y Z`
 //! print-memory        # prints `memory: VmRSS N kB frame F`
-//! print-frame         # prints the backend, the CPU backend's moving scale and the mean frame time
+//! print-frame         # prints the backend, the CPU backend's moving scale, mean and last frame time and size
 //! quit
 //! ```
 
