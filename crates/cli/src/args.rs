@@ -27,6 +27,37 @@ pub enum Command {
     Inspect(InspectArgs),
     /// The paper's experiments (Tables 5 and 6) on one scene, with image error (FLIP) against rt-only.
     Bench(BenchArgs),
+    /// Open a scene (the built-in demo scene when none is given) in an interactive window.
+    View(ViewArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// Scene file (TOML). Without one, the built-in demo scene opens.
+    pub scene: Option<PathBuf>,
+    /// Initial window size as WIDTHxHEIGHT (frames render at the window's size: larger windows
+    /// show more detail at the cost of frame time).
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Which stages run: hybrid (heuristic on), all, rt-only, raster.
+    #[arg(long, default_value = "hybrid", value_parser = parse_mode)]
+    pub mode: Mode,
+    /// Rendering backend. `auto` picks a hardware GPU that can draw into the window, else the
+    /// CPU; `gpu` also accepts software adapters (lavapipe), slower than `cpu`.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    #[command(flatten)]
+    pub heuristic: HeuristicArgs,
+    /// CPU backend: frame time (ms) to hold while the camera moves, by rendering at a reduced
+    /// resolution. Lower values move more smoothly but blurrier; the full-size frame follows
+    /// when the camera stops.
+    #[arg(long, default_value_t = 100.0)]
+    pub target_ms: f64,
+    /// Drive the window with the input events in this file (tests, demos); see the README.
+    #[arg(long)]
+    pub script: Option<PathBuf>,
+    #[command(flatten)]
+    pub capsule: CapsuleArgs,
 }
 
 #[derive(Debug, Args)]

@@ -3,6 +3,7 @@
 //! ```text
 //! hybrid render [SCENE] [-o out.png] [--size WxH] [--mode M] [--backend B] [--dump DIR] [--report FILE.json] [--time S]
 //! hybrid inspect SCENE [--json]
+//! hybrid view [SCENE] [--backend B] [--size WxH] [--mode M] [--budget N | --budget-ms MS] [--policy P] [--target-ms MS] [--script FILE]
 //! hybrid bench SCENE [--size WxH] [--frames N] [--path-seconds S] [--fps F] [--modes M,..] [--out DIR] [--flip-every K] [--sweep-budget]
 //! ```
 //! Bad input (scene files, models, flags) prints one clear error and exits with code 2.
@@ -13,6 +14,7 @@ mod dump;
 mod inspect;
 mod output;
 mod render;
+mod view;
 
 use std::process::ExitCode;
 
@@ -59,6 +61,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Inspect(a) => inspect::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::View(a) => view::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -124,6 +124,54 @@ impl GpuContext {
         Ok(Self { instance, adapter, device, queue, summary, timestamps })
     }
 
+    /// Like [`GpuContext::new`] with [`AdapterChoice::Any`], but on the caller's `instance` and
+    /// only with adapters that can present to `surface` (a window's), so the same device renders
+    /// the frame and draws it into the window. `HYBRID_ADAPTER=<substring>` still picks by name.
+    pub fn for_surface(instance: wgpu::Instance, surface: &wgpu::Surface<'_>) -> Result<Self, GpuError> {
+        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+        adapters.retain(|a| a.is_surface_supported(surface));
+        adapters.sort_by_key(|a| rank(&a.get_info()));
+        if let Ok(wanted) = std::env::var("HYBRID_ADAPTER") {
+            let found = adapters.iter().map(|a| a.get_info().name).collect::<Vec<_>>().join(", ");
+            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()));
+            if adapters.is_empty() {
+                return Err(GpuError::NoMatchingAdapter { wanted, found });
+            }
+        }
+        let mut refused = Vec::new();
+        adapters.retain(|a| match missing_capability(a) {
+            None => true,
+            Some(why) => {
+                refused.push(format!("{}: {why}", a.get_info().name));
+                false
+            }
+        });
+        let Some(adapter) = adapters.into_iter().next() else {
+            return Err(if refused.is_empty() {
+                GpuError::NoAdapter
+            } else {
+                GpuError::Unsupported { adapter: "every adapter that can present to the window".into(), why: refused.join("; ") }
+            });
+        };
+        let info = adapter.get_info();
+        let summary = AdapterSummary {
+            name: info.name.clone(),
+            backend: format!("{:?}", info.backend).to_lowercase(),
+            device_type: device_type_name(info.device_type).into(),
+            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
+        };
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        let desc =
+            wgpu::DeviceDescriptor { label: Some("hybrid"), required_features, required_limits: adapter.limits(), ..Default::default() };
+        let (device, queue) = pollster::block_on(adapter.request_device(&desc))
+            .map_err(|source| GpuError::RequestDevice { adapter: summary.name.clone(), source })?;
+        Ok(Self { instance, adapter, device, queue, summary, timestamps })
+    }
+
     /// Waits until the GPU has finished everything submitted so far.
     pub fn wait(&self) -> Result<(), GpuError> {
         self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))

@@ -144,6 +144,38 @@ impl<'s> GpuRenderer<'s> {
         frame
     }
 
+    /// Renders one frame's passes into the renderer's targets without reading any buffer back
+    /// (the interactive viewer's frame path): the final image and every other buffer stay on the
+    /// GPU, reachable through [`GpuRenderer::targets`]. Returns the frame's report.
+    pub fn render_to_targets(
+        &mut self,
+        camera: &Camera,
+        settings: FrameSettings,
+        on_stage: &mut dyn FnMut(&str),
+    ) -> Result<FrameReport, GpuError> {
+        let (w, h) = (settings.width, settings.height);
+        let scope = ErrorScope::push(&self.ctx.device);
+        let targets = match self.targets.take() {
+            Some(t) if t.width == w && t.height == h => t,
+            _ => FrameTargets::new(&self.ctx.device, w, h),
+        };
+        let result = self.render_into(&targets, camera, settings, on_stage).and_then(|r| scope.pop(&self.ctx).map(|()| r));
+        let report = result.map(|(mut report, wall)| {
+            report.timings_ms.frame = wall;
+            report
+        });
+        if report.is_ok() {
+            self.targets = Some(targets);
+        }
+        report
+    }
+
+    /// The targets of the last frame rendered (by [`GpuRenderer::render`] or
+    /// [`GpuRenderer::render_to_targets`]), if any: `final_image` is the sRGB-encoded result.
+    pub fn targets(&self) -> Option<&FrameTargets> {
+        self.targets.as_ref()
+    }
+
     /// The frame's passes into `targets`: returns the report and the wall-clock ms of the frame
     /// (submission to completion, read-backs of buffers not included).
     fn render_into(

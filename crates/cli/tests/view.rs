@@ -1,0 +1,176 @@
+//! `hybrid view` end to end: the real binary opens a real window inside a virtual X display
+//! (`xvfb-run`, package `xvfb`; these tests fail, not skip, without it) and is driven with
+//! `--script`. Screenshots are compared with `hybrid render` of the same camera, size and mode.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn scenes() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
+}
+
+/// Runs `hybrid view ARGS --script SCRIPT` under `xvfb-run`; panics (test failure) when
+/// xvfb-run cannot be started.
+fn view(dir: &Path, args: &[&str], script: &str) -> Output {
+    let script_path = dir.join("script.txt");
+    std::fs::write(&script_path, script).unwrap();
+    let runtime = dir.join("xdg");
+    std::fs::create_dir_all(&runtime).unwrap();
+    let out = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x1024x24", env!("CARGO_BIN_EXE_hybrid"), "view"])
+        .args(args)
+        .arg("--script")
+        .arg(&script_path)
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .current_dir(dir)
+        .output()
+        .expect("xvfb-run must be installed (apt-get install xvfb xauth) to run the viewer tests");
+    assert!(
+        out.status.success(),
+        "hybrid view failed: {}\nstdout: {}\nstderr: {}",
+        out.status,
+        stdout(&out),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn render(dir: &Path, args: &[&str], out: &Path) {
+    let o = Command::new(env!("CARGO_BIN_EXE_hybrid"))
+        .arg("render")
+        .args(args)
+        .arg("-o")
+        .arg(out)
+        .arg("--quiet")
+        .env("XDG_RUNTIME_DIR", dir)
+        .output()
+        .expect("run hybrid render");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+fn rgb(path: &Path) -> (u32, u32, Vec<u8>) {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display())).to_rgb8();
+    (img.width(), img.height(), img.into_raw())
+}
+
+fn mean_flip(a: &Path, b: &Path) -> f32 {
+    let (w, h, ra) = rgb(a);
+    let (w2, h2, rb) = rgb(b);
+    assert_eq!((w, h), (w2, h2), "{} vs {}", a.display(), b.display());
+    let err = nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(w, h, &ra),
+        nv_flip::FlipImageRgb8::with_data(w, h, &rb),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    nv_flip::FlipPool::from_image(&err).mean()
+}
+
+fn screenshot_equals_render(backend: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    let scene = scene.to_str().unwrap();
+    let args = ["--backend", backend, "--size", "96x64", "--mode", "hybrid"];
+    let mut view_args = vec![scene];
+    view_args.extend_from_slice(&args);
+    view(dir.path(), &view_args, "wait 3\nscreenshot shot.png\nquit\n");
+    let shot = dir.path().join("shot.png");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("shot.json")).unwrap()).unwrap();
+    assert_eq!(report["size"], serde_json::json!([96, 64]), "{report}");
+    assert_eq!(report["backend"], backend, "{report}");
+    let reference = dir.path().join("render.png");
+    let mut render_args = vec![scene];
+    render_args.extend_from_slice(&args);
+    render(dir.path(), &render_args, &reference);
+    let flip = mean_flip(&reference, &shot);
+    assert!(flip <= 0.02, "{backend}: mean FLIP {flip} between the viewer's screenshot and hybrid render");
+}
+
+#[test]
+fn cpu_screenshot_equals_render() {
+    screenshot_equals_render("cpu");
+}
+
+#[test]
+fn gpu_screenshot_equals_render() {
+    screenshot_equals_render("gpu");
+}
+
+fn cameras(out: &Output) -> Vec<[f32; 6]> {
+    stdout(out)
+        .lines()
+        .filter_map(|l| l.strip_prefix("camera: "))
+        .map(|l| {
+            let v: Vec<f32> = l.split_whitespace().filter_map(|w| w.parse().ok()).collect();
+            [v[0], v[1], v[2], v[3], v[4], v[5]]
+        })
+        .collect()
+}
+
+/// Holding W for N frames moves the camera forward by speed × N × the scripted time step; R
+/// puts the scene's camera back.
+#[test]
+fn holding_w_moves_forward_and_r_restores() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    let out = view(
+        dir.path(),
+        &[scene.to_str().unwrap(), "--backend", "cpu", "--size", "64x48"],
+        "print-camera\nkey-down w\nwait 30\nkey-up w\nprint-camera\npress r\nprint-camera\nquit\n",
+    );
+    let c = cameras(&out);
+    assert_eq!(c.len(), 3, "{}", stdout(&out));
+    let (p0, t0) = (glam::Vec3::from_slice(&c[0][..3]), glam::Vec3::from_slice(&c[0][3..]));
+    let p1 = glam::Vec3::from_slice(&c[1][..3]);
+    let dir0 = (t0 - p0).normalize();
+    // Speed at rest: half the scene camera's distance to its target per second; 30 steps of 1/30 s.
+    let expected = (t0 - p0).length() * 0.5;
+    let moved = p1 - p0;
+    assert!((moved.length() - expected).abs() < 1e-3 * expected.max(1.0), "moved {moved} (expected {expected} along {dir0})");
+    assert!(moved.normalize().dot(dir0) > 0.9999, "moved {moved}, forward {dir0}");
+    assert_eq!(c[2], c[0], "R must restore the scene camera");
+}
+
+/// 100 resizes and 1000 frames: resident memory after frame 100 grows by less than 5%.
+#[test]
+fn resizes_and_frames_do_not_leak() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    // Both sizes are visited before the first measurement, so what grows after it is a leak
+    // (targets, uploads or surface textures not freed on resize), not a bigger frame.
+    let mut script = String::from("resize 96 72\nwait 5\nresize 64 48\nwait 95\nprint-memory\n");
+    for i in 0..100 {
+        let (w, h) = if i % 2 == 0 { (96, 72) } else { (64, 48) };
+        script.push_str(&format!("resize {w} {h}\nwait 9\n"));
+    }
+    script.push_str("print-memory\nresize 80 60\nwait 5\nscreenshot resized.png\nquit\n");
+    let out = view(dir.path(), &[scene.to_str().unwrap(), "--backend", "cpu", "--size", "64x48"], &script);
+    let mem: Vec<(u64, u64)> = stdout(&out)
+        .lines()
+        .filter_map(|l| l.strip_prefix("memory: VmRSS "))
+        .map(|l| {
+            let v: Vec<u64> = l.split_whitespace().filter_map(|w| w.parse().ok()).collect();
+            (v[0], v[1])
+        })
+        .collect();
+    assert_eq!(mem.len(), 2, "{}", stdout(&out));
+    assert!(mem[1].1 >= 1000, "only {} frames", mem[1].1);
+    let growth = mem[1].0 as f64 / mem[0].0 as f64 - 1.0;
+    eprintln!("VmRSS at frame {}: {} kB, at frame {}: {} kB ({:+.2}%)", mem[0].1, mem[0].0, mem[1].1, mem[1].0, growth * 100.0);
+    // The resizes reached the window: the last one sets the screenshot's size.
+    assert_eq!(rgb(&dir.path().join("resized.png")).0, 80);
+    assert!(growth < 0.05, "resident memory grew {:.1}% ({} → {} kB)", growth * 100.0, mem[0].0, mem[1].0);
+}
+
+/// Without a display: one clear error suggesting `hybrid render`, exit 2.
+#[test]
+fn no_display_is_a_clear_error() {
+    let o = Command::new(env!("CARGO_BIN_EXE_hybrid")).args(["view"]).env_remove("DISPLAY").env_remove("WAYLAND_DISPLAY").output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("hybrid render") && err.contains("display"), "{err}");
+    assert_eq!(err.matches("error:").count(), 1, "{err}");
+}
