@@ -122,26 +122,12 @@ impl<'s> GpuRenderer<'s> {
     /// Renders one frame and reads every buffer back (for the image, dumps and tests).
     /// `on_stage` is told each stage's name as it is recorded.
     pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(Stage)) -> Result<Frame, GpuError> {
-        let (w, h) = (settings.width, settings.height);
-        let scope = ErrorScope::push(&self.ctx.device);
-        let targets = match self.targets.take() {
-            Some(t) if t.width == w && t.height == h => t,
-            _ => FrameTargets::new(&self.ctx.device, w, h),
-        };
-        let result = self.render_into(&targets, camera, settings, on_stage).and_then(|r| scope.pop(&self.ctx).map(|()| r));
-        let frame = result.and_then(|(report_parts, wall)| {
-            let gbuffer = readback::read_gbuffer(&self.ctx, &targets)?;
-            let buffers = readback::read_frame_buffers(&self.ctx, &targets)?;
-            let rt_packed = if self.capsule.is_some() { Some(readback::read_packed(&self.ctx, &targets)?) } else { None };
-            let mut report = report_parts;
-            report.timings_ms.frame = wall;
-            Ok(Frame { settings, gbuffer, buffers, rt_packed, report })
-        });
-        // Targets the device refused (too large) are not kept for the next frame.
-        if frame.is_ok() {
-            self.targets = Some(targets);
-        }
-        frame
+        let report = self.render_to_targets(camera, settings, on_stage)?;
+        let targets = self.targets.as_ref().ok_or_else(|| GpuError::Device("the frame's targets are missing after the frame".into()))?;
+        let gbuffer = readback::read_gbuffer(&self.ctx, targets)?;
+        let buffers = readback::read_frame_buffers(&self.ctx, targets)?;
+        let rt_packed = if self.capsule.is_some() { Some(readback::read_packed(&self.ctx, targets)?) } else { None };
+        Ok(Frame { settings, gbuffer, buffers, rt_packed, report })
     }
 
     /// Renders one frame's passes into the renderer's targets without reading any buffer back
@@ -151,7 +137,7 @@ impl<'s> GpuRenderer<'s> {
         &mut self,
         camera: &Camera,
         settings: FrameSettings,
-        on_stage: &mut dyn FnMut(&str),
+        on_stage: &mut dyn FnMut(Stage),
     ) -> Result<FrameReport, GpuError> {
         let (w, h) = (settings.width, settings.height);
         let scope = ErrorScope::push(&self.ctx.device);
