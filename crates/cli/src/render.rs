@@ -59,7 +59,17 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
     let backend = choose_backend(args.backend, args.quiet)?;
     let options = RenderOptions::from(&args.capsule);
-    let mut renderer = AnyRenderer::new(&backend, &scene, &file, options)?;
+    let mut renderer = match AnyRenderer::new(&backend, &scene, &file, options) {
+        // `--backend auto`: a GPU that refuses the scene (too large, out of memory) is not the
+        // end: the CPU backend renders it, saying so.
+        Err(e) if matches!(args.backend, BackendChoice::Auto) && matches!(backend, Backend::Gpu(_)) => {
+            if !args.quiet {
+                eprintln!("backend: cpu (auto: the GPU refused the scene: {})", e.message);
+            }
+            AnyRenderer::new(&Backend::Cpu, &scene, &file, options)?
+        }
+        other => other?,
+    };
     let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage))?;
     progress.finish();
 
@@ -143,7 +153,8 @@ impl<'s> AnyRenderer<'s> {
     pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(&str)) -> Result<Frame, CliError> {
         match self {
             AnyRenderer::Cpu(r) => Ok(r.render(camera, settings, on_stage)),
-            AnyRenderer::Gpu(r) => r.render(camera, settings, on_stage).map_err(|e| CliError::failure(e.to_string())),
+            // Out of memory, too large, device lost: the scene/size does not fit this GPU (exit 2).
+            AnyRenderer::Gpu(r) => r.render(camera, settings, on_stage).map_err(|e| CliError::bad_input(format!("--backend gpu: {e}"))),
         }
     }
 
