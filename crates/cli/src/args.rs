@@ -90,8 +90,9 @@ pub struct RenderArgs {
     pub time: Option<f32>,
     #[command(flatten)]
     pub heuristic: HeuristicArgs,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads (default: all cores), at most 1024 (`MAX_THREADS`). More threads than
+    /// cores adds scheduling overhead without speed; fewer leaves cores idle.
+    #[arg(long, value_parser = parse_threads)]
     pub threads: Option<usize>,
     #[command(flatten)]
     pub capsule: CapsuleArgs,
@@ -142,8 +143,9 @@ pub struct BenchArgs {
     pub sweep_budget: bool,
     #[command(flatten)]
     pub heuristic: HeuristicArgs,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads (default: all cores), at most 1024 (`MAX_THREADS`). More threads than
+    /// cores adds scheduling overhead without speed; fewer leaves cores idle.
+    #[arg(long, value_parser = parse_threads)]
     pub threads: Option<usize>,
     #[command(flatten)]
     pub capsule: CapsuleArgs,
@@ -297,5 +299,32 @@ mod tests {
     fn modes() {
         assert_eq!(parse_mode("rt-only"), Ok(Mode::RtOnly));
         assert!(parse_mode("fast").unwrap_err().contains("unknown mode"));
+    }
+}
+
+/// Upper bound of `--threads`: far above any real core count, far below what makes thread
+/// creation fail or hang.
+pub const MAX_THREADS: usize = 1024;
+
+/// `--threads N`: 1 ..= [`MAX_THREADS`].
+fn parse_threads(s: &str) -> Result<usize, String> {
+    let n: usize = s.trim().parse().map_err(|_| format!("`{s}` is not a whole number of threads"))?;
+    if n == 0 || n > MAX_THREADS {
+        return Err(format!("{n} threads is out of range: use 1 to {MAX_THREADS}"));
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod thread_limit_tests {
+    use super::*;
+
+    #[test]
+    fn threads_are_bounded() {
+        assert_eq!(parse_threads("4"), Ok(4));
+        assert_eq!(parse_threads("1024"), Ok(MAX_THREADS));
+        assert!(parse_threads("0").is_err());
+        assert!(parse_threads("100000").unwrap_err().contains("1 to 1024"));
+        assert!(parse_threads("-3").is_err());
     }
 }

@@ -97,3 +97,88 @@ pub fn ensure_parent(file: &Path) -> Result<(), CliError> {
     let _ = fs::remove_file(probe);
     Ok(())
 }
+
+/// Checks an output file flag (`-o`, `--report`) before any work: it must not name a folder,
+/// its extension must be one of `extensions` (case-insensitive; empty = any), and its folder must
+/// exist and be writable.
+pub fn check_output_file(file: &Path, flag: &str, extensions: &[&str]) -> Result<(), CliError> {
+    if file.is_dir() {
+        return Err(CliError::bad_input(format!("{}: {flag} names a folder; give a file name", file.display())));
+    }
+    if !extensions.is_empty() {
+        let ext = file.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        if !extensions.contains(&ext.as_str()) {
+            let want: Vec<String> = extensions.iter().map(|e| format!(".{e}")).collect();
+            let got = if ext.is_empty() { "no extension".to_string() } else { format!("`.{ext}`") };
+            return Err(CliError::bad_input(format!(
+                "{}: {flag} has {got}, but only {} is written (the format follows the extension)",
+                file.display(),
+                want.join(", ")
+            )));
+        }
+    }
+    ensure_parent(file)
+}
+
+/// A `--dump` folder prepared before rendering: created (and probed) now, removed again on drop
+/// unless [`DumpDir::keep`] is called, when this run created it, so a failing render leaves no
+/// empty or half-filled folder behind.
+pub struct DumpDir {
+    path: PathBuf,
+    created: bool,
+    keep: bool,
+}
+
+impl DumpDir {
+    pub fn prepare(dir: &Path) -> Result<Self, CliError> {
+        if dir.exists() && !dir.is_dir() {
+            return Err(CliError::bad_input(format!("{}: --dump names a file; give a folder", dir.display())));
+        }
+        let created = !dir.exists();
+        // Remove what we create if the checks below fail.
+        let guard = Self { path: dir.to_path_buf(), created, keep: false };
+        ensure_dir(dir)?;
+        Ok(guard)
+    }
+    /// The render succeeded: keep the folder.
+    pub fn keep(mut self) {
+        self.keep = true;
+    }
+}
+
+impl Drop for DumpDir {
+    fn drop(&mut self) {
+        if self.created && !self.keep {
+            let _ = fs::remove_dir_all(&self.path);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn output_file_checks() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = check_output_file(dir.path(), "-o", &["png"]).unwrap_err();
+        assert!(e.message.contains("names a folder") && e.code == crate::EXIT_BAD_INPUT, "{}", e.message);
+        let e = check_output_file(&dir.path().join("x.jpg"), "-o", &["png"]).unwrap_err();
+        assert!(e.message.contains("`.jpg`") && e.message.contains(".png"), "{}", e.message);
+        assert!(check_output_file(&dir.path().join("x.PNG"), "-o", &["png"]).is_ok());
+        assert!(check_output_file(&dir.path().join("r"), "--report", &[]).is_ok());
+    }
+
+    #[test]
+    fn dump_dir_created_by_a_failed_run_is_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().join("new");
+        drop(DumpDir::prepare(&d).unwrap());
+        assert!(!d.exists());
+        DumpDir::prepare(&d).unwrap().keep();
+        assert!(d.is_dir());
+        // An existing folder is never removed.
+        drop(DumpDir::prepare(&d).unwrap());
+        assert!(d.is_dir());
+    }
+}

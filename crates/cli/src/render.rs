@@ -14,7 +14,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::CliError;
 use crate::args::{BackendChoice, CapsuleArgs, CapsuleVisibilityChoice, RenderArgs};
 use crate::dump::{DumpInput, write_all};
-use crate::output::{ensure_dir, ensure_parent, write_bytes, write_png_rgba8};
+use crate::output::{DumpDir, check_output_file, write_bytes, write_png_rgba8};
 
 /// Renders longer than this show a progress bar (unless `--quiet`).
 const PROGRESS_AFTER: Duration = Duration::from_secs(1);
@@ -22,13 +22,11 @@ const PROGRESS_AFTER: Duration = Duration::from_secs(1);
 pub fn run(args: RenderArgs) -> Result<(), CliError> {
     // Check every output location before doing any work, so bad flags fail fast and nothing
     // is half-written.
-    ensure_parent(&args.output)?;
+    check_output_file(&args.output, "-o", &["png"])?;
     if let Some(r) = &args.report {
-        ensure_parent(r)?;
+        check_output_file(r, "--report", &[])?;
     }
-    if let Some(d) = &args.dump {
-        ensure_dir(d)?;
-    }
+    let dump_dir = args.dump.as_deref().map(DumpDir::prepare).transpose()?;
     if let Some(n) = args.threads {
         if n == 0 {
             return Err(CliError::bad_input("--threads must be at least 1"));
@@ -61,7 +59,17 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
     let backend = choose_backend(args.backend, args.quiet)?;
     let options = RenderOptions::from(&args.capsule);
-    let mut renderer = AnyRenderer::new(&backend, &scene, &file, options)?;
+    let mut renderer = match AnyRenderer::new(&backend, &scene, &file, options) {
+        // `--backend auto`: a GPU that refuses the scene (too large, out of memory) is not the
+        // end: the CPU backend renders it, saying so.
+        Err(e) if matches!(args.backend, BackendChoice::Auto) && matches!(backend, Backend::Gpu(_)) => {
+            if !args.quiet {
+                eprintln!("backend: cpu (auto: the GPU refused the scene: {})", e.message);
+            }
+            AnyRenderer::new(&Backend::Cpu, &scene, &file, options)?
+        }
+        other => other?,
+    };
     let frame = renderer.render(&camera, settings, &mut |stage| progress.stage(stage.name()))?;
     progress.finish();
 
@@ -72,6 +80,9 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     if let Some(path) = &args.report {
         let json = serde_json::to_vec_pretty(&frame.report).map_err(|e| CliError::failure(e.to_string()))?;
         write_bytes(path, &json)?;
+    }
+    if let Some(d) = dump_dir {
+        d.keep();
     }
     if !args.quiet {
         let t = &frame.report.timings_ms;
@@ -142,7 +153,8 @@ impl<'s> AnyRenderer<'s> {
     pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(Stage)) -> Result<Frame, CliError> {
         match self {
             AnyRenderer::Cpu(r) => Ok(r.render(camera, settings, on_stage)),
-            AnyRenderer::Gpu(r) => r.render(camera, settings, on_stage).map_err(|e| CliError::failure(e.to_string())),
+            // Out of memory, too large, device lost: the scene/size does not fit this GPU (exit 2).
+            AnyRenderer::Gpu(r) => r.render(camera, settings, on_stage).map_err(|e| CliError::bad_input(format!("--backend gpu: {e}"))),
         }
     }
 

@@ -65,9 +65,12 @@ impl<'s> GpuRenderer<'s> {
         // wgpu reports invalid use and exhausted memory asynchronously (by default with a panic):
         // capture both while the scene is uploaded and the pipelines built, and return them.
         let scope = ErrorScope::push(&ctx.device);
-        let renderer = Self::build(ctx.clone(), scene)?;
-        scope.pop(&ctx)?;
-        Ok(renderer)
+        // Pop the scopes whatever `build` returned (an early return used to drop them in the wrong
+        // order: "Mismatched pop_error_scope call"); a captured device error explains an early
+        // failure better than the failure itself, so it wins.
+        let built = Self::build(ctx.clone(), scene);
+        let popped = scope.pop(&ctx);
+        popped.and(built)
     }
 
     fn build(ctx: Arc<GpuContext>, scene: &'s Scene) -> Result<Self, GpuError> {
@@ -145,7 +148,9 @@ impl<'s> GpuRenderer<'s> {
             Some(t) if t.width == w && t.height == h => t,
             _ => FrameTargets::new(&self.ctx.device, w, h),
         };
-        let result = self.render_into(&targets, camera, settings, on_stage).and_then(|r| scope.pop(&self.ctx).map(|()| r));
+        let rendered = self.render_into(&targets, camera, settings, on_stage);
+        // Always popped, in order, whatever the frame returned (see `new`).
+        let result = scope.pop(&self.ctx).and(rendered);
         let report = result.map(|(mut report, wall)| {
             report.timings_ms.frame = wall;
             report
@@ -316,9 +321,12 @@ impl<'s> GpuRenderer<'s> {
 }
 
 /// Validation and out-of-memory errors of the device, captured instead of wgpu's default panic.
+///
+/// Field order matters: a guard dropped without `pop` pops its scope, fields drop in declaration
+/// order, and scopes must pop in reverse push order (validation, pushed last, first).
 struct ErrorScope {
-    out_of_memory: wgpu::ErrorScopeGuard,
     validation: wgpu::ErrorScopeGuard,
+    out_of_memory: wgpu::ErrorScopeGuard,
 }
 
 impl ErrorScope {

@@ -39,7 +39,8 @@ pub const MAX_TRACE_DEPTH: u32 = 64;
 
 /// Loads and validates a scene file; relative paths inside are relative to the file.
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::new(path, format!("cannot read scene file: {e}")))?;
+    let bytes = crate::load::read_capped(path, "scene file", crate::load::MAX_SCENE_FILE_BYTES)?;
+    let text = String::from_utf8(bytes).map_err(|e| SceneError::new(path, format!("cannot read scene file: not UTF-8 text ({e})")))?;
     parse_scene(&text, path)
 }
 

@@ -44,6 +44,11 @@ struct Ctx<'a> {
 
 pub(super) fn load(path: &Path, materials: &mut Vec<Material>, textures: &mut Vec<Texture>) -> Result<Vec<Mesh>, SceneError> {
     let (doc, buffers, images) = import(path)?;
+    // Validate before any of the gltf crate's readers run (they panic on forbidden accessors).
+    let len = |i: usize| buffers.get(i).map_or(0, |d| d.0.len());
+    super::gltf_check::check_document(&doc, &len).map_err(|e| SceneError::new(path, e))?;
+    let bytes = |i: usize| buffers.get(i).map_or(&[][..], |d| &d.0[..]);
+    super::gltf_check::check_sparse_indices(&doc, &bytes).map_err(|e| SceneError::new(path, e))?;
     let scene = doc.default_scene().or_else(|| doc.scenes().next()).ok_or_else(|| SceneError::new(path, "glTF file has no scene"))?;
     let material_base = materials.len();
     let mut ctx = Ctx {
@@ -87,7 +92,7 @@ pub(super) fn load(path: &Path, materials: &mut Vec<Material>, textures: &mut Ve
 /// rejected (gltf ignores extensions it was not built for, whatever their content).
 fn import(path: &Path) -> Result<(::gltf::Document, Vec<::gltf::buffer::Data>, Vec<::gltf::image::Data>), SceneError> {
     let fail = |what: &str, e: &dyn std::fmt::Display| SceneError::new(path, format!("{what}: {e}"));
-    let bytes = std::fs::read(path).map_err(|e| fail("cannot read glTF file", &e))?;
+    let bytes = super::read_capped(path, "glTF file", super::MAX_MODEL_BYTES)?;
     let (json, blob) = if bytes.starts_with(b"glTF") {
         let glb = ::gltf::Glb::from_slice(&bytes).map_err(|e| fail("invalid GLB container", &e))?;
         (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
@@ -105,9 +110,36 @@ fn import(path: &Path) -> Result<(::gltf::Document, Vec<::gltf::buffer::Data>, V
     let json = ::gltf::json::serialize::to_vec(&value).map_err(|e| fail("invalid glTF JSON", &e))?;
     let gltf = ::gltf::Gltf::from_slice(&json).map_err(|e| fail("invalid glTF", &e))?;
     let base = path.parent();
+    check_external_files(path, &gltf.document)?;
     let buffers = ::gltf::import_buffers(&gltf.document, base, blob).map_err(|e| fail("cannot load glTF buffers", &e))?;
     let images = ::gltf::import_images(&gltf.document, base, &buffers).map_err(|e| fail("cannot load glTF images", &e))?;
     Ok((gltf.document, buffers, images))
+}
+
+/// External buffers and images (relative URIs, not `data:`) must be regular files within the
+/// read caps before the gltf crate reads them whole.
+fn check_external_files(path: &Path, doc: &::gltf::Document) -> Result<(), SceneError> {
+    let base = path.parent().unwrap_or(Path::new("."));
+    let external = |uri: &str| (!uri.starts_with("data:")).then(|| base.join(uri));
+    for b in doc.buffers() {
+        if let ::gltf::buffer::Source::Uri(uri) = b.source()
+            && let Some(file) = external(uri)
+            && file.exists()
+        {
+            super::check_file(&file, "glTF buffer", super::MAX_MODEL_BYTES)
+                .map_err(|e| SceneError::new(path, format!("buffer {}: {}: {}", b.index(), file.display(), e.message)))?;
+        }
+    }
+    for im in doc.images() {
+        if let ::gltf::image::Source::Uri { uri, .. } = im.source()
+            && let Some(file) = external(uri)
+            && file.exists()
+        {
+            super::check_file(&file, "texture file", super::MAX_TEXTURE_FILE_BYTES)
+                .map_err(|e| SceneError::new(path, format!("image {}: {}: {}", im.index(), file.display(), e.message)))?;
+        }
+    }
+    Ok(())
 }
 
 /// Every member of every `extensions` object must itself be a JSON object.
@@ -248,6 +280,10 @@ impl Ctx<'_> {
             for t in &mut mesh.tangents {
                 let xyz = (m3 * t.truncate()).normalize_or_zero();
                 *t = xyz.extend(if mirror { -t.w } else { t.w });
+            }
+            // A finite matrix can still overflow a finite position to infinity.
+            if let Some((i, p)) = mesh.positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+                return Err(self.err(format!("{what}: vertex {i} is not finite after the node transform ({}, {}, {})", p.x, p.y, p.z)));
             }
             if mirror {
                 for tri in &mut mesh.indices {

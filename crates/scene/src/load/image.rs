@@ -8,10 +8,12 @@ use crate::{ColorSpace, SceneError, Texture};
 pub(crate) const MAX_TEXTURE_SIDE: u32 = 16_384;
 
 pub(super) fn load(path: &Path, color_space: ColorSpace) -> Result<Texture, SceneError> {
-    let reader = ::image::ImageReader::open(path).map_err(|e| SceneError::new(path, format!("cannot open texture: {e}")))?;
+    let bytes = super::read_capped(path, "texture file", super::MAX_TEXTURE_FILE_BYTES)?;
+    let reader = ::image::ImageReader::new(std::io::Cursor::new(&bytes[..]));
     let reader = reader.with_guessed_format().map_err(|e| SceneError::new(path, format!("cannot read texture: {e}")))?;
     match reader.format() {
-        Some(::image::ImageFormat::Png | ::image::ImageFormat::Jpeg) => {}
+        Some(::image::ImageFormat::Png) => {}
+        Some(::image::ImageFormat::Jpeg) => check_jpeg_complete(&bytes).map_err(|e| SceneError::new(path, e))?,
         Some(f) => return Err(SceneError::new(path, format!("unsupported texture format {f:?} (expected PNG or JPEG)"))),
         None => return Err(SceneError::new(path, "not a PNG or JPEG image (unrecognised contents)")),
     }
@@ -28,6 +30,19 @@ pub(super) fn load(path: &Path, color_space: ColorSpace) -> Result<Texture, Scen
     }
     let texels: Vec<[u8; 4]> = rgba.as_raw().chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect();
     Ok(Texture::new(texture_name(path), w, h, texels, color_space))
+}
+
+/// Strict JPEG check: the decoder fills a truncated scan with grey and reports success, so the
+/// file must end its last scan (SOS, `FF DA`) with an end-of-image marker (`FF D9`). Inside a
+/// scan's entropy-coded data every `FF` byte is followed by `00` or a restart marker, so an EOI
+/// found after the last SOS really ends that scan.
+pub(crate) fn check_jpeg_complete(bytes: &[u8]) -> Result<(), String> {
+    let find_last = |marker: u8| bytes.windows(2).rposition(|w| w[0] == 0xFF && w[1] == marker);
+    let sos = find_last(0xDA).ok_or("JPEG has no image data (no start-of-scan marker)")?;
+    match find_last(0xD9) {
+        Some(eoi) if eoi > sos => Ok(()),
+        _ => Err("JPEG is truncated (its last scan has no end-of-image marker)".into()),
+    }
 }
 
 /// The texture's name: its file name.
@@ -55,6 +70,18 @@ pub(crate) fn looks_like_normal_map(texels: &[[u8; 4]]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn truncated_jpeg_is_rejected_and_a_whole_one_accepted() {
+        let img = ::image::RgbImage::from_fn(32, 32, |x, y| ::image::Rgb([(x * 8) as u8, (y * 8) as u8, 99]));
+        let mut bytes = Vec::new();
+        ::image::DynamicImage::ImageRgb8(img).write_to(&mut std::io::Cursor::new(&mut bytes), ::image::ImageFormat::Jpeg).unwrap();
+        assert!(check_jpeg_complete(&bytes).is_ok());
+        let e = check_jpeg_complete(&bytes[..bytes.len() - 10]).unwrap_err();
+        assert!(e.contains("truncated"), "{e}");
+        assert!(check_jpeg_complete(&bytes[..bytes.len() / 2]).is_err());
+        assert!(check_jpeg_complete(&bytes[..20]).is_err());
+    }
 
     #[test]
     fn normal_map_detection() {

@@ -10,7 +10,7 @@ use crate::SceneError;
 const BATCH: u64 = 1 << 16;
 
 pub(super) fn load(path: &Path) -> Result<(Vec<Vec3>, Vec<[u8; 3]>), SceneError> {
-    let file_len = std::fs::metadata(path).map_err(|e| SceneError::new(path, format!("cannot open LAS file: {e}")))?.len();
+    let file_len = super::check_file(path, "LAS file", super::MAX_MODEL_BYTES)?;
     let mut reader = ::las::Reader::from_path(path).map_err(|e| SceneError::new(path, format!("cannot read LAS header: {e}")))?;
     let header = reader.header();
     let declared = header.number_of_points();

@@ -10,6 +10,7 @@
 #![allow(clippy::result_large_err)]
 
 mod gltf;
+mod gltf_check;
 mod image;
 mod las;
 mod obj;
@@ -70,6 +71,43 @@ pub fn load_texture(path: &Path, color_space: ColorSpace) -> Result<Texture, Sce
     image::load(path, color_space)
 }
 
+/// Largest scene (TOML) file read: scene files are hand-written text.
+pub const MAX_SCENE_FILE_BYTES: u64 = 16 << 20;
+/// Largest OBJ material library (MTL) read.
+pub const MAX_MTL_BYTES: u64 = 64 << 20;
+/// Largest model or point-cloud file (glTF/GLB, OBJ, PLY, LAS/LAZ) and glTF buffer read.
+pub const MAX_MODEL_BYTES: u64 = 4 << 30;
+/// Largest texture file (PNG, JPEG) read.
+pub const MAX_TEXTURE_FILE_BYTES: u64 = 512 << 20;
+
+/// Checks that `path` is a regular file (not a folder, pipe or device such as `/dev/zero`, which
+/// would be read until memory runs out) of at most `max` bytes; returns its length. `what` names
+/// the kind of file in the message.
+pub(crate) fn check_file(path: &Path, what: &str, max: u64) -> Result<u64, SceneError> {
+    let meta = std::fs::metadata(path).map_err(|e| SceneError::new(path, format!("cannot open {what}: {e}")))?;
+    if !meta.is_file() {
+        return Err(SceneError::new(path, format!("{what} is not a regular file")));
+    }
+    if meta.len() > max {
+        return Err(SceneError::new(path, format!("{what} is {} bytes, above the limit of {max} bytes for a {what}", meta.len())));
+    }
+    Ok(meta.len())
+}
+
+/// Reads a whole file after [`check_file`], never more than `max` bytes (the file may grow
+/// between the check and the read).
+pub(crate) fn read_capped(path: &Path, what: &str, max: u64) -> Result<Vec<u8>, SceneError> {
+    use std::io::Read;
+    let len = check_file(path, what, max)?;
+    let file = std::fs::File::open(path).map_err(|e| SceneError::new(path, format!("cannot read {what}: {e}")))?;
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    file.take(max + 1).read_to_end(&mut bytes).map_err(|e| SceneError::new(path, format!("cannot read {what}: {e}")))?;
+    if bytes.len() as u64 > max {
+        return Err(SceneError::new(path, format!("{what} grew above the limit of {max} bytes while being read")));
+    }
+    Ok(bytes)
+}
+
 /// Capacity to reserve for `declared` records of at least `min_bytes` each when `available`
 /// bytes remain: never more than the file could hold, so a lying header cannot make us allocate.
 pub(crate) fn capped_capacity(declared: usize, min_bytes: usize, available: u64) -> usize {
@@ -104,6 +142,19 @@ mod tests {
         assert_eq!(capped_capacity(35_947, 12, 120), 10);
         assert_eq!(capped_capacity(10, 12, 1_000_000), 10);
         assert_eq!(capped_capacity(usize::MAX, 0, 5), 5);
+    }
+
+    #[test]
+    fn special_and_oversized_files_are_refused() {
+        let e = read_capped(Path::new("/dev/zero"), "model file", MAX_MODEL_BYTES).unwrap_err();
+        assert!(e.to_string().contains("/dev/zero") && e.message.contains("not a regular file"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("big.mtl");
+        std::fs::write(&f, vec![b'#'; 100]).unwrap();
+        let e = read_capped(&f, "material library", 10).unwrap_err();
+        assert!(e.message.contains("limit of 10 bytes"), "{e}");
+        assert_eq!(read_capped(&f, "material library", 100).unwrap().len(), 100);
+        assert!(check_file(dir.path(), "scene file", 100).unwrap_err().message.contains("not a regular file"));
     }
 
     #[test]

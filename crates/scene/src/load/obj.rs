@@ -18,15 +18,15 @@ const EMPTY_NAME: &str = "\u{1}unnamed";
 
 pub(super) fn load(path: &Path, materials: &mut Vec<Material>, textures: &mut Vec<Texture>) -> Result<Vec<Mesh>, SceneError> {
     let opts = tobj::LoadOptions { single_index: true, triangulate: false, ignore_points: true, ignore_lines: true };
-    let bytes = std::fs::read(path).map_err(|e| SceneError::new(path, format!("cannot read OBJ file: {e}")))?;
+    let bytes = super::read_capped(path, "OBJ file", super::MAX_MODEL_BYTES)?;
     let text = decode_text(path, bytes)?;
     let text = preprocess(path, &text)?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let mtl_warning = std::cell::RefCell::new(None);
     let loader = |name: &Path| -> tobj::MTLLoadResult {
         let mtl_path = resolve(dir, &name.to_string_lossy().replace('\\', "/"));
-        let loaded = std::fs::read(&mtl_path)
-            .map_err(|e| format!("cannot read material library {}: {e}", mtl_path.display()))
+        let loaded = super::read_capped(&mtl_path, "material library", super::MAX_MTL_BYTES)
+            .map_err(|e| format!("cannot read material library {}: {}", mtl_path.display(), e.message))
             .and_then(|b| decode_text(&mtl_path, b).map_err(|e| e.to_string()))
             .map(|t| preprocess_mtl(&t))
             .and_then(|t| {
@@ -168,7 +168,7 @@ fn decode_text(path: &Path, bytes: Vec<u8>) -> Result<String, SceneError> {
 
 /// Fixes what tobj cannot read and rejects what it silently accepts:
 /// - `l` (polyline) statements are dropped: lines are not drawn (tobj reads `l a b c d` as a quad);
-/// - an `f` without vertices is an error;
+/// - an `f` without vertices, or with an index 0 (vertex, texture or normal), is an error;
 /// - `usemtl` with an empty name selects the material with an empty name;
 /// - exponents written `3.1+e2` / `3.1-e2` are read as `3.1e+2` / `3.1e-2`.
 fn preprocess(path: &Path, text: &str) -> Result<String, SceneError> {
@@ -183,6 +183,14 @@ fn preprocess(path: &Path, text: &str) -> Result<String, SceneError> {
             Some("l") => {}
             Some("f") if words.next().is_none() => {
                 return Err(SceneError::at(path, text, start..start + body.len(), "face (`f`) without vertices"));
+            }
+            Some("f") if body.split_whitespace().skip(1).any(|w| w.split('/').any(|i| i.parse::<i64>() == Ok(0))) => {
+                return Err(SceneError::at(
+                    path,
+                    text,
+                    start..start + body.len(),
+                    "face (`f`) with index 0 (OBJ vertex, texture and normal indices start at 1; negative ones count back)",
+                ));
             }
             Some("usemtl") if words.next().is_none() => {
                 out.push_str("usemtl ");

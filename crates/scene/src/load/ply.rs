@@ -253,6 +253,7 @@ struct PlyFile<'a> {
 
 impl<'a> PlyFile<'a> {
     fn open(path: &'a Path) -> Result<Self, SceneError> {
+        super::check_file(path, "PLY file", super::MAX_MODEL_BYTES)?;
         let file = File::open(path).map_err(|e| SceneError::new(path, format!("cannot open PLY file: {e}")))?;
         let len = file.metadata().map(|m| m.len()).unwrap_or(0);
         if len == 0 {
@@ -425,6 +426,31 @@ impl<'a> PlyFile<'a> {
         Ok(())
     }
 
+    /// ASCII files: nothing but blank lines may follow the last element. More data means the
+    /// header under-counts an element (e.g. a vertex line then read as a face).
+    fn check_no_trailing_data(&mut self, last: &str) -> Result<(), SceneError> {
+        if self.header.encoding != Encoding::Ascii {
+            return Ok(());
+        }
+        let mut extra = 0usize;
+        loop {
+            self.line.clear();
+            let n = self.reader.get_mut().read_line(&mut self.line).map_err(|e| self.err(format!("cannot read: {e}")))?;
+            if n == 0 {
+                break;
+            }
+            if !self.line.trim().is_empty() {
+                extra += 1;
+            }
+        }
+        if extra > 0 {
+            return Err(self.err(format!(
+                "{extra} line(s) of data after the last {last}: the header's element counts are smaller than the body (a vertex line read as a face?)"
+            )));
+        }
+        Ok(())
+    }
+
     fn skip(&mut self, def: &ElementDef) -> Result<(), SceneError> {
         let parser = Parser::<Skip>::new();
         for i in 0..def.count {
@@ -456,6 +482,11 @@ fn vertex_def<'h>(f: &PlyFile<'_>, header: &'h Header) -> Result<&'h ElementDef,
     for c in ["x", "y", "z"] {
         if !def.properties.contains_key(c) {
             return Err(f.err(format!("PLY vertex element has no `{c}` property")));
+        }
+    }
+    for (name, p) in &def.properties {
+        if slot_of(name).is_some() && matches!(p.data_type, PropertyType::List(..)) {
+            return Err(f.err(format!("PLY vertex property `{name}` is declared as a list; vertex attributes must be scalars")));
         }
     }
     Ok(def)
@@ -569,6 +600,7 @@ pub(super) fn load_mesh(path: &Path, materials: &mut Vec<Material>) -> Result<Ve
             _ => f.skip(def)?,
         }
     }
+    f.check_no_trailing_data(header.elements.keys().last().map_or("element", |k| k.as_str()))?;
     check_indices(&mesh.indices, mesh.positions.len()).map_err(|m| f.err(m))?;
     if mesh.indices.is_empty() {
         return Err(f.err("PLY file has no faces with 3 or more vertices (use it as a point cloud)"));
