@@ -78,50 +78,9 @@ impl GpuContext {
             instance = instance_for(wgpu::Backends::GL);
             adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
         }
-        adapters.sort_by_key(|a| rank(&a.get_info()));
-        if let Ok(wanted) = std::env::var("HYBRID_ADAPTER") {
-            let found = adapters.iter().map(|a| a.get_info().name).collect::<Vec<_>>().join(", ");
-            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()));
-            if adapters.is_empty() {
-                return Err(GpuError::NoMatchingAdapter { wanted, found });
-            }
-        }
-        if choice == AdapterChoice::HardwareOnly {
-            adapters.retain(|a| !matches!(a.get_info().device_type, wgpu::DeviceType::Cpu | wgpu::DeviceType::Other));
-        }
-        // Adapters that cannot run every pass are skipped (with the reason, if none is left).
-        let mut refused = Vec::new();
-        adapters.retain(|a| match missing_capability(a) {
-            None => true,
-            Some(why) => {
-                refused.push(format!("{}: {why}", a.get_info().name));
-                false
-            }
-        });
-        let Some(adapter) = adapters.into_iter().next() else {
-            return Err(if refused.is_empty() {
-                GpuError::NoAdapter
-            } else {
-                GpuError::Unsupported { adapter: "every adapter found".into(), why: refused.join("; ") }
-            });
-        };
-        let info = adapter.get_info();
-        let summary = AdapterSummary {
-            name: info.name.clone(),
-            backend: format!("{:?}", info.backend).to_lowercase(),
-            device_type: device_type_name(info.device_type).into(),
-            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
-        };
-        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let mut required_features = wgpu::Features::empty();
-        if timestamps {
-            required_features |= wgpu::Features::TIMESTAMP_QUERY;
-        }
-        let desc =
-            wgpu::DeviceDescriptor { label: Some("hybrid"), required_features, required_limits: adapter.limits(), ..Default::default() };
-        let (device, queue) = pollster::block_on(adapter.request_device(&desc))
-            .map_err(|source| GpuError::RequestDevice { adapter: summary.name.clone(), source })?;
-        Ok(Self { instance, adapter, device, queue, summary, timestamps })
+        let hardware_only = choice == AdapterChoice::HardwareOnly;
+        let adapter = pick_adapter(adapters, hardware_only, "every adapter found")?;
+        Self::open(instance, adapter)
     }
 
     /// Like [`GpuContext::new`] with [`AdapterChoice::Any`], but on the caller's `instance` and
@@ -130,29 +89,13 @@ impl GpuContext {
     pub fn for_surface(instance: wgpu::Instance, surface: &wgpu::Surface<'_>) -> Result<Self, GpuError> {
         let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
         adapters.retain(|a| a.is_surface_supported(surface));
-        adapters.sort_by_key(|a| rank(&a.get_info()));
-        if let Ok(wanted) = std::env::var("HYBRID_ADAPTER") {
-            let found = adapters.iter().map(|a| a.get_info().name).collect::<Vec<_>>().join(", ");
-            adapters.retain(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()));
-            if adapters.is_empty() {
-                return Err(GpuError::NoMatchingAdapter { wanted, found });
-            }
-        }
-        let mut refused = Vec::new();
-        adapters.retain(|a| match missing_capability(a) {
-            None => true,
-            Some(why) => {
-                refused.push(format!("{}: {why}", a.get_info().name));
-                false
-            }
-        });
-        let Some(adapter) = adapters.into_iter().next() else {
-            return Err(if refused.is_empty() {
-                GpuError::NoAdapter
-            } else {
-                GpuError::Unsupported { adapter: "every adapter that can present to the window".into(), why: refused.join("; ") }
-            });
-        };
+        let adapter = pick_adapter(adapters, false, "every adapter that can present to the window")?;
+        Self::open(instance, adapter)
+    }
+
+    /// Opens a device on `adapter` with the adapter's own limits (large scenes need big storage
+    /// buffers) and timestamp queries where offered.
+    fn open(instance: wgpu::Instance, adapter: wgpu::Adapter) -> Result<Self, GpuError> {
         let info = adapter.get_info();
         let summary = AdapterSummary {
             name: info.name.clone(),
@@ -217,6 +160,34 @@ fn missing_capability(adapter: &wgpu::Adapter) -> Option<String> {
         ("bind groups", l.max_bind_groups, 3),
     ];
     needs.iter().find(|(_, has, need)| has < need).map(|(what, has, need)| format!("{what}: {has}, needs {need}"))
+}
+
+/// The best of `adapters` (ranked; `HYBRID_ADAPTER=<substring>` picks one by name), skipping
+/// software ones when `hardware_only` and those that cannot run every pass (with the reasons, if
+/// none is left; `which` names the set in that error).
+fn pick_adapter(mut adapters: Vec<wgpu::Adapter>, hardware_only: bool, which: &str) -> Result<wgpu::Adapter, GpuError> {
+    adapters.sort_by_key(|a| rank(&a.get_info()));
+    if let Ok(wanted) = std::env::var("HYBRID_ADAPTER") {
+        let found = adapters.iter().map(|a| a.get_info().name).collect::<Vec<_>>().join(", ");
+        adapters.retain(|a| a.get_info().name.to_lowercase().contains(&wanted.to_lowercase()));
+        if adapters.is_empty() {
+            return Err(GpuError::NoMatchingAdapter { wanted, found });
+        }
+    }
+    if hardware_only {
+        adapters.retain(|a| !matches!(a.get_info().device_type, wgpu::DeviceType::Cpu | wgpu::DeviceType::Other));
+    }
+    let mut refused = Vec::new();
+    adapters.retain(|a| match missing_capability(a) {
+        None => true,
+        Some(why) => {
+            refused.push(format!("{}: {why}", a.get_info().name));
+            false
+        }
+    });
+    adapters.into_iter().next().ok_or_else(|| {
+        if refused.is_empty() { GpuError::NoAdapter } else { GpuError::Unsupported { adapter: which.into(), why: refused.join("; ") } }
+    })
 }
 
 /// Sort key: hardware before software, Vulkan/Metal/DX12 before GL.
