@@ -8,7 +8,7 @@ use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
 use hybrid_gpu::{AdapterChoice, GpuContext, GpuError};
-use hybrid_scene::{Camera, Scene, demo_scene, load_scene};
+use hybrid_scene::{Camera, DEMO_SCENE_TOML, InputKind, Scene, demo_scene, input_kind, load_scene_or_model, model_scene_toml};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
@@ -37,9 +37,12 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     }
     args.heuristic.check()?;
     let mut scene: Scene = match &args.scene {
-        Some(path) => load_scene(path)?,
+        Some(path) => load_scene_or_model(path)?,
         None => demo_scene(),
     };
+    if let Some(out) = &args.save_scene {
+        save_scene(args.scene.as_deref(), out)?;
+    }
     args.heuristic.apply(&mut scene.heuristic);
     let camera = match args.time {
         None => scene.camera,
@@ -227,4 +230,25 @@ impl Progress {
     fn finish(&self) {
         self.bar.finish_and_clear();
     }
+}
+
+/// `--save-scene`: writes the default scene of a model file (or the built-in demo scene) as TOML,
+/// with the model's path relative to `out`. A scene file is already editable, so it is refused.
+fn save_scene(input: Option<&std::path::Path>, out: &std::path::Path) -> Result<(), CliError> {
+    let text = match input {
+        None => DEMO_SCENE_TOML.to_string(),
+        Some(path) => {
+            if input_kind(path)? == InputKind::Scene {
+                return Err(CliError::bad_input(format!(
+                    "--save-scene: {} is already a scene file; copy it to edit it (--save-scene writes the default scene of a model file)",
+                    path.display()
+                )));
+            }
+            model_scene_toml(path, out)?
+        }
+    };
+    if out.extension().and_then(|e| e.to_str()).is_none_or(|e| !e.eq_ignore_ascii_case("toml")) {
+        return Err(CliError::bad_input(format!("--save-scene {}: the file name must end in .toml", out.display())));
+    }
+    std::fs::write(out, text).map_err(|e| CliError::bad_input(format!("--save-scene {}: cannot write: {e}", out.display())))
 }
