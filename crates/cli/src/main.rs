@@ -63,9 +63,11 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", e.message);
-            if let Some(d) = e.detail {
-                eprintln!("{d:?}");
+            // Once: the diagnostic with its source snippet when there is one (it carries the
+            // same message), else the plain line.
+            match e.detail {
+                Some(d) => eprintln!("{d:?}"),
+                None => eprintln!("error: {}", e.message),
             }
             ExitCode::from(e.code)
         }

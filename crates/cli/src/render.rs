@@ -52,6 +52,16 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
             }
             let name = args.scene.as_ref().map_or("the demo scene".to_string(), |p| p.display().to_string());
             let path = scene.camera_path.as_ref().ok_or_else(|| CliError::bad_input(format!("--time {t}: {name} has no [camera_path]")))?;
+            if let (Some(first), Some(last)) = (path.keyframes.first(), path.keyframes.last()) {
+                let clamped = t.clamp(first.time, last.time);
+                if clamped != t {
+                    let side = if t > last.time { "past the end" } else { "before the start" };
+                    eprintln!(
+                        "warning: --time {t} is {side} of the camera path ({} s to {} s); rendering at {clamped} s",
+                        first.time, last.time
+                    );
+                }
+            }
             path.camera_at(&scene.camera, t)
         }
     };

@@ -76,3 +76,28 @@ fn unknown_file_types_exit_2_saying_what_is_accepted() {
     }
     assert!(!out.exists());
 }
+
+/// Issue 23: `--time` beyond the camera path's end says that it was clamped.
+#[test]
+fn time_past_the_camera_path_says_it_was_clamped() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("path.toml");
+    std::fs::write(
+        &scene,
+        "[[material]]\nname = \"m\"\n[[object]]\nprimitive = \"cube\"\nmaterial = \"m\"\n\
+         [[camera_path.keyframe]]\ntime = 0.0\nposition = [0.0, 0.0, 5.0]\ntarget = [0.0, 0.0, 0.0]\n\
+         [[camera_path.keyframe]]\ntime = 2.0\nposition = [5.0, 0.0, 0.0]\ntarget = [0.0, 0.0, 0.0]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("o.png");
+    let run = |t: &str| {
+        hybrid(&["render", scene.to_str().unwrap(), "--backend", "cpu", "--size", "32x24", "-o", out.to_str().unwrap(), "--time", t])
+    };
+    let r = run("9");
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(err.contains("past the end") && err.contains("rendering at 2 s"), "{err}");
+    let r = run("1.5");
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success() && !err.contains("clamp") && !err.contains("warning"), "{err}");
+}
