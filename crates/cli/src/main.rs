@@ -52,6 +52,8 @@ impl From<hybrid_scene::SceneError> for CliError {
 }
 
 fn main() -> ExitCode {
+    // Before anything else, while this is the only thread (it sets an environment variable).
+    hybrid_gpu::context::quiet_window_system_probe();
     let cli = Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();

@@ -101,3 +101,19 @@ fn time_past_the_camera_path_says_it_was_clamped() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success() && !err.contains("clamp") && !err.contains("warning"), "{err}");
 }
+
+/// Issue 23: a successful `--backend auto` run prints no line starting `error:` (the Vulkan
+/// loader's window-system probe used to print two when XDG_RUNTIME_DIR was unset).
+#[test]
+fn auto_backend_prints_no_error_lines_on_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.png");
+    let r = Command::new(env!("CARGO_BIN_EXE_hybrid"))
+        .args(["render", "--backend", "auto", "--size", "32x24", "-o", out.to_str().unwrap()])
+        .env_remove("XDG_RUNTIME_DIR")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(!err.lines().any(|l| l.trim_start().starts_with("error")), "{err}");
+}
