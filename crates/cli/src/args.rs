@@ -62,8 +62,14 @@ pub struct ViewArgs {
 
 #[derive(Debug, Args)]
 pub struct RenderArgs {
-    /// Scene file (TOML). Without one, the built-in demo scene is rendered.
+    /// Scene file (TOML), or a model file (.gltf, .glb, .obj, .ply; point clouds .ply, .las,
+    /// .laz) to render in a default scene: camera framing it, a sun, a sky, a ground plane.
+    /// Without one, the built-in demo scene is rendered.
     pub scene: Option<PathBuf>,
+    /// Write the scene being rendered as a TOML scene file to edit (paths in it relative to the
+    /// written file). Most useful with a model file, whose default scene is otherwise not saved.
+    #[arg(long, value_name = "FILE.toml")]
+    pub save_scene: Option<PathBuf>,
     /// Output image (8-bit sRGB PNG).
     #[arg(short = 'o', long = "output", default_value = "out.png")]
     pub output: PathBuf,
@@ -103,7 +109,7 @@ pub struct RenderArgs {
 
 #[derive(Debug, Args)]
 pub struct InspectArgs {
-    /// Scene file (TOML).
+    /// Scene file (TOML), or a model file (.gltf, .glb, .obj, .ply, .las, .laz) in a default scene.
     pub scene: PathBuf,
     /// Print machine-readable JSON instead of the table row.
     #[arg(long)]
@@ -112,7 +118,7 @@ pub struct InspectArgs {
 
 #[derive(Debug, Args)]
 pub struct BenchArgs {
-    /// Scene file (TOML).
+    /// Scene file (TOML), or a model file (.gltf, .glb, .obj, .ply, .las, .laz) in a default scene.
     pub scene: PathBuf,
     /// Image size as WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]

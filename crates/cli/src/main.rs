@@ -54,6 +54,8 @@ impl From<hybrid_scene::SceneError> for CliError {
 }
 
 fn main() -> ExitCode {
+    // Before anything else, while this is the only thread (it sets an environment variable).
+    hybrid_gpu::context::quiet_window_system_probe();
     let cli = Cli::parse();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
@@ -66,9 +68,11 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", e.message);
-            if let Some(d) = e.detail {
-                eprintln!("{d:?}");
+            // Once: the diagnostic with its source snippet when there is one (it carries the
+            // same message), else the plain line.
+            match e.detail {
+                Some(d) => eprintln!("{d:?}"),
+                None => eprintln!("error: {}", e.message),
             }
             ExitCode::from(e.code)
         }

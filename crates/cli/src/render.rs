@@ -8,7 +8,7 @@ use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
 use hybrid_gpu::{AdapterChoice, GpuContext, GpuError};
-use hybrid_scene::{Camera, Scene, demo_scene, load_scene};
+use hybrid_scene::{Camera, DEMO_SCENE_TOML, InputKind, Scene, demo_scene, input_kind, load_scene_or_model, model_scene_toml};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
@@ -35,9 +35,12 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     }
     args.heuristic.check()?;
     let mut scene: Scene = match &args.scene {
-        Some(path) => load_scene(path)?,
+        Some(path) => load_scene_or_model(path)?,
         None => demo_scene(),
     };
+    if let Some(out) = &args.save_scene {
+        save_scene(args.scene.as_deref(), out)?;
+    }
     args.heuristic.apply(&mut scene.heuristic);
     let camera = match args.time {
         None => scene.camera,
@@ -47,6 +50,16 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
             }
             let name = args.scene.as_ref().map_or("the demo scene".to_string(), |p| p.display().to_string());
             let path = scene.camera_path.as_ref().ok_or_else(|| CliError::bad_input(format!("--time {t}: {name} has no [camera_path]")))?;
+            if let (Some(first), Some(last)) = (path.keyframes.first(), path.keyframes.last()) {
+                let clamped = t.clamp(first.time, last.time);
+                if clamped != t {
+                    let side = if t > last.time { "past the end" } else { "before the start" };
+                    eprintln!(
+                        "warning: --time {t} is {side} of the camera path ({} s to {} s); rendering at {clamped} s",
+                        first.time, last.time
+                    );
+                }
+            }
             path.camera_at(&scene.camera, t)
         }
     };
@@ -239,4 +252,25 @@ impl Progress {
     fn finish(&self) {
         self.bar.finish_and_clear();
     }
+}
+
+/// `--save-scene`: writes the default scene of a model file (or the built-in demo scene) as TOML,
+/// with the model's path relative to `out`. A scene file is already editable, so it is refused.
+fn save_scene(input: Option<&std::path::Path>, out: &std::path::Path) -> Result<(), CliError> {
+    let text = match input {
+        None => DEMO_SCENE_TOML.to_string(),
+        Some(path) => {
+            if input_kind(path)? == InputKind::Scene {
+                return Err(CliError::bad_input(format!(
+                    "--save-scene: {} is already a scene file; copy it to edit it (--save-scene writes the default scene of a model file)",
+                    path.display()
+                )));
+            }
+            model_scene_toml(path, out)?
+        }
+    };
+    if out.extension().and_then(|e| e.to_str()).is_none_or(|e| !e.eq_ignore_ascii_case("toml")) {
+        return Err(CliError::bad_input(format!("--save-scene {}: the file name must end in .toml", out.display())));
+    }
+    std::fs::write(out, text).map_err(|e| CliError::bad_input(format!("--save-scene {}: cannot write: {e}", out.display())))
 }

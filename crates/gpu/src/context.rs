@@ -215,3 +215,21 @@ fn device_type_name(t: wgpu::DeviceType) -> &'static str {
         wgpu::DeviceType::Other => "other",
     }
 }
+
+/// Keeps the adapter probe quiet where `XDG_RUNTIME_DIR` is unset (CI, ssh, containers): the
+/// Vulkan loader's window-system probing (libwayland) then prints `error: XDG_RUNTIME_DIR is
+/// invalid or not set` on every instance, though nothing is wrong. Pointing the variable at a
+/// directory that does not exist keeps libwayland quiet and makes it find no display, which is
+/// the truth when the variable was unset (a Wayland session always sets it). Nothing is created.
+///
+/// Call it first thing in `main`, before any thread starts (it sets an environment variable).
+pub fn quiet_window_system_probe() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| !d.is_empty()) {
+        return;
+    }
+    let dir = std::env::temp_dir().join("hybrid-no-xdg-runtime-dir");
+    // SAFETY: interop point with the Vulkan loader/libwayland, which read XDG_RUNTIME_DIR.
+    // `set_var` is unsound only while other threads read the environment; the documented
+    // contract of this function is that it runs at the start of `main`, before any thread exists.
+    unsafe { std::env::set_var("XDG_RUNTIME_DIR", dir) };
+}

@@ -20,7 +20,7 @@ use hybrid_core::{Frame, FrameSettings, Mode};
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::GpuContext;
 use hybrid_gpu::frame::GpuRenderer;
-use hybrid_scene::{Budget, Policy, Scene, demo_scene, load_scene};
+use hybrid_scene::{Budget, Policy, Scene, demo_scene, load_scene_or_model};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -108,7 +108,7 @@ pub fn run(options: ViewOptions) -> Result<(), ViewError> {
         None => None,
     };
     let mut scene = match &options.scene {
-        Some(path) => load_scene(path).map_err(|e| ViewError::bad_input(e.to_string()))?,
+        Some(path) => load_scene_or_model(path).map_err(|e| ViewError::bad_input(e.to_string()))?,
         None => demo_scene(),
     };
     if let Some(b) = options.budget {

@@ -26,7 +26,7 @@ use std::path::Path;
 
 use hybrid_core::report::{FrameReport, StageTimings};
 use hybrid_core::{FrameSettings, Mode};
-use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene};
+use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene_or_model};
 use serde::Serialize;
 use serde_json::json;
 
@@ -54,7 +54,7 @@ use self::stats::*;
 pub fn run(args: BenchArgs) -> Result<(), CliError> {
     check_args(&args)?;
     let name = args.scene.display().to_string();
-    let mut scene = load_scene(&args.scene)?;
+    let mut scene = load_scene_or_model(&args.scene)?;
     args.heuristic.apply(&mut scene.heuristic);
     let plan = plan(&args, &scene, &name)?;
     let backend = choose_backend(args.backend, args.quiet)?;
