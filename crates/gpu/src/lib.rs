@@ -8,6 +8,8 @@ pub mod capsule;
 pub mod context;
 pub mod frame;
 pub mod heuristic;
+#[cfg(test)]
+mod layouts;
 pub mod lighting;
 pub mod primary;
 pub mod raster;

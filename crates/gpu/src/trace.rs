@@ -34,11 +34,11 @@ pub const GPU_MAX_TRACE_DEPTH: u32 = 32;
 /// `struct TraceParams` in trace.wgsl (the scene's `[trace]` settings).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
-struct TraceParams {
-    ray_bias: f32,
-    importance_cutoff: f32,
-    max_depth: u32,
-    _pad: u32,
+pub(crate) struct TraceParams {
+    pub(crate) ray_bias: f32,
+    pub(crate) importance_cutoff: f32,
+    pub(crate) max_depth: u32,
+    pub(crate) _pad: u32,
 }
 
 /// The three trace passes and what they share.
