@@ -54,9 +54,10 @@ pub struct TraceOutput {
     pub rays: RayCounts,
 }
 
-/// Recursion limit whatever `scene.trace.max_depth` says, so a huge setting between two perfect
-/// mirrors cannot overflow a thread's stack.
-pub const MAX_TRACE_DEPTH: u32 = 64;
+/// Recursion limit whatever `scene.trace.max_depth` says (the scene format's own limit, defined
+/// once in `hybrid_scene`), so a huge setting between two perfect mirrors cannot overflow a
+/// thread's stack.
+pub use hybrid_scene::MAX_TRACE_DEPTH;
 
 /// Pixels per parallel work item (uneven ray cost: items are handed out one at a time).
 const CHUNK: usize = 64;

@@ -1,12 +1,52 @@
-//! `shaders`: every pass's WGSL is `common.wgsl` (group 0, surfaces, lights, sky) followed by the
-//! pass's own file, which sits beside it in `src/shaders/`.
+//! `shaders`: every pass's WGSL is the generated header of shared constants ([`constants`]), then
+//! `common.wgsl` (group 0, surfaces, lights, sky), then the pass's own file, which sits beside it
+//! in `src/shaders/`.
 
 /// Shared declarations and functions (the WGSL twins of hybrid-core's shading).
 pub const COMMON: &str = include_str!("shaders/common.wgsl");
 
-/// `COMMON` followed by a pass's own source.
+/// `constants()`, then `COMMON`, then a pass's own source.
 pub fn with_common(pass_source: &str) -> String {
-    format!("{COMMON}\n{pass_source}")
+    format!("{}\n{COMMON}\n{pass_source}", constants())
+}
+
+/// The WGSL header of every constant that Rust and WGSL share, generated from the Rust
+/// definitions so the two cannot drift: object ids, the shadow class that is evaluated at the
+/// hit, the blend's mask threshold, mesh flags, light and sky kinds, stack sizes, the count
+/// pass's span.
+pub fn constants() -> String {
+    use crate::scene::*;
+    let u32s = [
+        ("NO_OBJECT", hybrid_core::NO_OBJECT),
+        ("RT_SCENE_OBJECT", hybrid_core::RT_SCENE_OBJECT),
+        ("MESH_HAS_NORMALS", MESH_HAS_NORMALS),
+        ("MESH_HAS_UVS", MESH_HAS_UVS),
+        ("MESH_HAS_TANGENTS", MESH_HAS_TANGENTS),
+        ("MESH_HAS_COLORS", MESH_HAS_COLORS),
+        ("LIGHT_DIRECTIONAL", LIGHT_DIRECTIONAL),
+        ("LIGHT_POINT", LIGHT_POINT),
+        ("LIGHT_SPOT", LIGHT_SPOT),
+        ("BVH_STACK", crate::bvh::STACK_SIZE as u32),
+        ("SPHERE_STACK", crate::spheres::STACK),
+        ("TRACE_STACK", crate::trace::TRACE_STACK),
+        ("SPAN", crate::heuristic::COUNT_SPAN),
+    ];
+    // The sky kind is an i32 in WGSL (compared with a signed uniform field).
+    let i32s = [("SKY_COLOR", SKY_COLOR), ("SKY_GRADIENT", SKY_GRADIENT), ("SKY_CUBE", SKY_CUBE)];
+    let f32s = [("SHADOW_EVALUATE", hybrid_core::prepare::SHADOW_EVALUATE), ("MASK_EPSILON", hybrid_core::blend::MASK_EPSILON)];
+    let mut out = String::from("// Generated from the Rust definitions (hybrid_gpu::shaders::constants).\n");
+    for (name, v) in u32s {
+        out += &format!("const {name}: u32 = {v}u;\n");
+    }
+    for (name, v) in i32s {
+        out += &format!("const {name}: i32 = {};\n", v as i32);
+    }
+    for (name, v) in f32s {
+        // `{:?}` prints the shortest decimal that reads back to the same f32 (always with a dot or
+        // an exponent, so WGSL reads it as a float).
+        out += &format!("const {name}: f32 = {v:?};\n");
+    }
+    out
 }
 
 /// Compiles a pass's shader (common.wgsl prepended).
@@ -46,5 +86,32 @@ fn probe() {
         if let Err(e) = validate(&with_common(probe)) {
             panic!("{e}");
         }
+    }
+
+    /// Every shared constant is defined once, in Rust: no shader file declares one by hand, and the
+    /// header holds each value exactly.
+    #[test]
+    fn shared_constants_come_only_from_the_header() {
+        let header = constants();
+        let files = [
+            ("common.wgsl", COMMON),
+            ("blend.wgsl", crate::blend::BLEND_WGSL),
+            ("bvh.wgsl", crate::bvh::BVH_WGSL),
+            ("count.wgsl", crate::heuristic::COUNT_WGSL),
+            ("mask.wgsl", crate::heuristic::MASK_WGSL),
+            ("spheres.wgsl", crate::spheres::SPHERES_WGSL),
+            ("trace.wgsl", crate::trace::TRACE_WGSL),
+        ];
+        let names: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("const ")).map(|l| l.split(':').next().unwrap()).collect();
+        assert!(names.len() >= 18, "{header}");
+        for name in &names {
+            for (file, source) in files {
+                assert!(!source.contains(&format!("const {name}:")), "{file} declares {name} by hand");
+            }
+        }
+        assert!(header.contains(&format!("const NO_OBJECT: u32 = {}u;", u32::MAX)));
+        assert!(header.contains("const SHADOW_EVALUATE: f32 = -1.0;"));
+        assert!(header.contains("const MASK_EPSILON: f32 = 0.0001;"));
+        assert!(header.contains(&format!("const TRACE_STACK: u32 = {}u;", crate::trace::TRACE_STACK)));
     }
 }

@@ -27,9 +27,13 @@ use crate::timing::StageTimer;
 /// The pass's own WGSL (after common.wgsl, bvh.wgsl and spheres.wgsl).
 pub const TRACE_WGSL: &str = include_str!("shaders/trace.wgsl");
 
-/// The deepest secondary ray the GPU traces: the CPU's `MAX_TRACE_DEPTH` (64) capped by the
-/// pending-ray stack of trace.wgsl (`TRACE_STACK`).
-pub const GPU_MAX_TRACE_DEPTH: u32 = 32;
+/// Pending secondary rays per pixel in trace.wgsl (`TRACE_STACK`, generated from this): the walk
+/// is depth first, so at most one pending sibling per level.
+pub const TRACE_STACK: u32 = 32;
+
+/// The deepest secondary ray the GPU traces: the scene format's `MAX_TRACE_DEPTH` capped by the
+/// pending-ray stack.
+pub const GPU_MAX_TRACE_DEPTH: u32 = if hybrid_scene::MAX_TRACE_DEPTH < TRACE_STACK { hybrid_scene::MAX_TRACE_DEPTH } else { TRACE_STACK };
 
 /// `struct TraceParams` in trace.wgsl (the scene's `[trace]` settings).
 #[repr(C)]

@@ -15,7 +15,7 @@ pub mod texture;
 
 pub use camera::{Camera, CameraPath, Keyframe, Projection};
 pub use error::SceneError;
-pub use file::{DEMO_SCENE_TOML, demo_scene, load_scene, parse_scene};
+pub use file::{DEMO_SCENE_TOML, MAX_TRACE_DEPTH, demo_scene, load_scene, parse_scene};
 pub use model::*;
 pub use model_scene::{ACCEPTED_INPUTS, InputKind, input_kind, load_scene_or_model, model_scene_toml};
 pub use stats::SceneStats;

@@ -12,7 +12,6 @@
 @group(0) @binding(6) var final_image: texture_storage_2d<rgba8unorm, write>;
 
 // Listing 10: `heurVal < 0.0001` means "not traced" (hybrid_core::blend::MASK_EPSILON).
-const MASK_EPSILON: f32 = 1e-4;
 
 // Eq. 5/6 averaged: CM = OM·M + (1 − OM)(OR·R + (1 − OR)·C); CR = OR·R + (1 − OR)(OM·M + (1 − OM)·C).
 fn combine(c: vec3<f32>, m: vec3<f32>, r: vec3<f32>, reflectivity: f32, transparency: f32) -> vec3<f32> {

@@ -15,8 +15,6 @@ struct BvhTri {
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(1) @binding(1) var<storage, read> bvh_tris: array<BvhTri>;
 
-const BVH_STACK: u32 = 64u;
-const SHADOW_EVALUATE: f32 = -1.0;
 const NO_HIT: u32 = 0xffffffffu;
 
 /// A ray–triangle hit: distance, triangle index (NO_HIT on a miss), weights of its corners.

@@ -39,11 +39,6 @@ struct Triangle {
     mesh: u32,
 }
 
-const MESH_HAS_NORMALS: u32 = 1u;
-const MESH_HAS_UVS: u32 = 2u;
-const MESH_HAS_TANGENTS: u32 = 4u;
-const MESH_HAS_COLORS: u32 = 8u;
-
 struct MeshInfo {
     object: u32,
     material: u32,
@@ -62,10 +57,6 @@ struct Material {
     maps1: vec4<i32>,        // normal, optical, -, -
 }
 
-const LIGHT_DIRECTIONAL: u32 = 0u;
-const LIGHT_POINT: u32 = 1u;
-const LIGHT_SPOT: u32 = 2u;
-
 struct Light {
     kind: vec4<u32>,        // kind, casts_shadows, -, -
     position: vec4<f32>,
@@ -74,13 +65,6 @@ struct Light {
     attenuation: vec4<f32>, // constant, linear, quadratic
     cone: vec4<f32>,        // cos inner, cos outer
 }
-
-const SKY_COLOR: i32 = 0;
-const SKY_GRADIENT: i32 = 1;
-const SKY_CUBE: i32 = 2;
-
-const NO_OBJECT: u32 = 0xffffffffu;
-const RT_SCENE_OBJECT: u32 = 0xfffffffeu;
 
 @group(0) @binding(0) var<uniform> frame: FrameUniforms;
 @group(0) @binding(1) var<storage, read> vertices: array<Vertex>;

@@ -18,7 +18,6 @@ struct CountParams {
 @group(0) @binding(2) var<uniform> params: CountParams;
 
 // Pixels per invocation (one row segment).
-const SPAN: u32 = 16u;
 
 fn add_run(id: u32, length: u32) {
     if id < params.object_count {

@@ -4,7 +4,6 @@
 
 const MODE_OBJECTS: u32 = 0u;
 const MODE_ALL_COVERED: u32 = 1u;
-const NO_OBJECT_ID: u32 = 0xffffffffu;
 
 struct MaskParams {
     mode: u32,
@@ -32,7 +31,7 @@ fn write_mask(@builtin(global_invocation_id) gid: vec3<u32>) {
     if params.mode == MODE_OBJECTS {
         on = id < params.object_count && selected[id] != 0u;
     } else if params.mode == MODE_ALL_COVERED {
-        on = id != NO_OBJECT_ID;
+        on = id != NO_OBJECT;
     }
     textureStore(mask, p, vec4<f32>(select(0.0, 1.0, on), 0.0, 0.0, 1.0));
 }

@@ -36,8 +36,6 @@ struct Sphere {
 @group(2) @binding(3) var<storage, read> sphere_ids: array<u32>;
 @group(2) @binding(4) var<storage, read> sphere_clouds: array<vec4<f32>>;
 
-/// Entries of the traversal stack (the host checks the tree's depth against it).
-const SPHERE_STACK: u32 = 64u;
 
 struct SphereHit {
     hit: bool,

@@ -35,9 +35,6 @@ struct TraceParams {
 
 const KIND_REFLECTION: u32 = 0u;
 const KIND_REFRACTION: u32 = 1u;
-/// Pending secondary rays per pixel: the walk is depth first, so at most one pending sibling
-/// per level (≤ max depth entries).
-const TRACE_STACK: u32 = 32u;
 
 /// The G-buffer surface at pixel `p` (hybrid_core::GBuffer::surface).
 fn gbuffer_surface(p: vec2<i32>) -> Surface {
