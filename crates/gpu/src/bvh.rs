@@ -20,7 +20,7 @@ use hybrid_core::PreparedScene;
 use crate::context::{GpuContext, GpuError};
 use crate::scene::{GpuTriangle, GpuVertex, SceneGpu};
 
-/// The traversal WGSL (needs common.wgsl before it; declares group 1 bindings 0 and 1).
+/// The traversal WGSL (needs common/*.wgsl before it; declares group 1 bindings 0 and 1).
 pub const BVH_WGSL: &str = include_str!("shaders/bvh.wgsl");
 
 /// Entries of the traversal stack in `bvh.wgsl` (`BVH_STACK`): the deepest tree it can walk.

@@ -23,12 +23,12 @@ use crate::spheres::{SPHERES_WGSL, SpheresGpu};
 use crate::targets::{FrameTargets, PACKED_FORMAT, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::StageTimer;
 
-/// The capsule pass's WGSL (after common.wgsl and spheres.wgsl).
+/// The capsule pass's WGSL (after common/*.wgsl and spheres.wgsl).
 pub const CAPSULE_WGSL: &str = include_str!("shaders/capsule.wgsl");
-/// The unpack pass's WGSL (after common.wgsl).
+/// The unpack pass's WGSL (after common/*.wgsl).
 pub const UNPACK_WGSL: &str = include_str!("shaders/unpack.wgsl");
 
-/// The capsule's full source: spheres.wgsl then capsule.wgsl (common.wgsl is prepended by
+/// The capsule's full source: spheres.wgsl then capsule.wgsl (common/*.wgsl is prepended by
 /// `shaders::module`).
 pub fn capsule_source() -> String {
     format!("{SPHERES_WGSL}\n{CAPSULE_WGSL}")

@@ -79,7 +79,7 @@ fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLay
     }
 }
 
-/// A compute pipeline from a standalone shader (no common.wgsl: these passes need no scene; the
+/// A compute pipeline from a standalone shader (no common/*.wgsl: these passes need no scene; the
 /// generated constants header only).
 pub(crate) fn compute_pipeline(
     device: &wgpu::Device,

@@ -12,7 +12,7 @@ use crate::shaders;
 use crate::targets::{COLOR_FORMAT, FrameTargets};
 use crate::timing::StageTimer;
 
-/// WGSL of the pass (common.wgsl is prepended).
+/// WGSL of the pass (common/*.wgsl is prepended).
 pub const SOURCE: &str = include_str!("shaders/lighting.wgsl");
 
 /// Workgroup edge (8 × 8 invocations).

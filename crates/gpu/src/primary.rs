@@ -14,7 +14,7 @@ use crate::shaders;
 use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::StageTimer;
 
-/// The pass's own WGSL (after common.wgsl and bvh.wgsl).
+/// The pass's own WGSL (after common/*.wgsl and bvh.wgsl).
 pub const PRIMARY_WGSL: &str = include_str!("shaders/primary.wgsl");
 
 /// The primary-ray G-buffer pass.

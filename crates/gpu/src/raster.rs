@@ -3,7 +3,7 @@
 //!
 //! Vertex pulling: no vertex buffers, `draw(0..3 · triangle_count)`; the vertex shader reads
 //! corner `vi % 3` of triangle `vi / 3` from group 0. The fragment shader evaluates the surface
-//! with common.wgsl's `evaluate_surface` (the CPU's `TriangleSurface::at`), its UV footprint from
+//! with common/*.wgsl's `evaluate_surface` (the CPU's `TriangleSurface::at`), its UV footprint from
 //! the fine screen derivatives of the UV, and writes the eight G-buffer targets
 //! ([`GBUFFER_COLOR_FORMATS`]) and reversed-Z depth (Greater, write on). No face culling: the
 //! CPU rasteriser draws both sides too.
@@ -16,7 +16,7 @@ use crate::shaders;
 use crate::targets::{FrameTargets, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::StageTimer;
 
-/// WGSL of the pass (common.wgsl is prepended).
+/// WGSL of the pass (common/*.wgsl is prepended).
 pub const SOURCE: &str = include_str!("shaders/raster.wgsl");
 
 /// The G-buffer render pipeline.

@@ -1,6 +1,6 @@
 //! `scene`: the prepared scene uploaded once (world-space vertices, triangles, meshes, Table 1
 //! materials, every texture with its mips, lights) plus the per-frame uniforms. Every pass binds
-//! the same group 0 (`SceneGpu::layout`), declared once in `shaders/common.wgsl`, so raster,
+//! the same group 0 (`SceneGpu::layout`), declared once in `shaders/common/*.wgsl`, so raster,
 //! lighting and trace evaluate surfaces and lights with the same WGSL functions.
 
 use bytemuck::{Pod, Zeroable};
@@ -10,7 +10,7 @@ use hybrid_scene::{Camera, ColorSpace, Environment, Lights, Skybox};
 
 use crate::context::{GpuContext, GpuError};
 
-/// `struct Vertex` in common.wgsl: world-space attributes of one vertex (w components unused
+/// `struct Vertex` in common/*.wgsl: world-space attributes of one vertex (w components unused
 /// unless noted). 80 bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]

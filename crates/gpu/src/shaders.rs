@@ -1,9 +1,21 @@
 //! `shaders`: every pass's WGSL is the generated header of shared constants ([`constants`]), then
-//! `common.wgsl` (group 0, surfaces, lights, sky), then the pass's own file, which sits beside it
+//! `common/*.wgsl` (group 0, surfaces, lights, sky), then the pass's own file, which sits beside it
 //! in `src/shaders/`.
 
-/// Shared declarations and functions (the WGSL twins of hybrid-core's shading).
-pub const COMMON: &str = include_str!("shaders/common.wgsl");
+/// Shared declarations and functions (the WGSL twins of hybrid-core's shading), in named parts
+/// under `shaders/common/`, in this order: the scene's group 0 bindings and structs, small
+/// helpers (finite checks, sRGB, luminance), texture sampling, surface evaluation, camera rays,
+/// shading (lights, Blinn–Phong, reflect/refract), the skybox, the G-buffer outputs.
+pub const COMMON: &str = concat!(
+    include_str!("shaders/common/scene.wgsl"),
+    include_str!("shaders/common/helpers.wgsl"),
+    include_str!("shaders/common/sampling.wgsl"),
+    include_str!("shaders/common/surface.wgsl"),
+    include_str!("shaders/common/camera.wgsl"),
+    include_str!("shaders/common/shading.wgsl"),
+    include_str!("shaders/common/sky.wgsl"),
+    include_str!("shaders/common/gbuffer.wgsl"),
+);
 
 /// `constants()`, then `COMMON`, then a pass's own source.
 pub fn with_common(pass_source: &str) -> String {
@@ -49,7 +61,7 @@ pub fn constants() -> String {
     out
 }
 
-/// Compiles a pass's shader (common.wgsl prepended).
+/// Compiles a pass's shader (common/*.wgsl prepended).
 pub fn module(device: &wgpu::Device, label: &str, pass_source: &str) -> wgpu::ShaderModule {
     device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
@@ -94,7 +106,7 @@ fn probe() {
     fn shared_constants_come_only_from_the_header() {
         let header = constants();
         let files = [
-            ("common.wgsl", COMMON),
+            ("common/*.wgsl", COMMON),
             ("blend.wgsl", crate::blend::BLEND_WGSL),
             ("bvh.wgsl", crate::bvh::BVH_WGSL),
             ("count.wgsl", crate::heuristic::COUNT_WGSL),

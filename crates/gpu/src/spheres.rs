@@ -22,7 +22,7 @@ use wgpu::util::DeviceExt;
 
 use crate::context::{GpuContext, GpuError};
 
-/// The WGSL of group 2 (include it after common.wgsl: `shaders::with_common(&format!("{SPHERES_WGSL}\n{pass}"))`).
+/// The WGSL of group 2 (include it after common/*.wgsl: `shaders::with_common(&format!("{SPHERES_WGSL}\n{pass}"))`).
 pub const SPHERES_WGSL: &str = include_str!("shaders/spheres.wgsl");
 
 /// Traversal stack entries in spheres.wgsl (`SPHERE_STACK`); the tree's depth must stay below it.

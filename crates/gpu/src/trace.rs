@@ -24,7 +24,7 @@ use crate::spheres::{SPHERES_WGSL, SpheresGpu};
 use crate::targets::{COLOR_FORMAT, FrameTargets};
 use crate::timing::StageTimer;
 
-/// The pass's own WGSL (after common.wgsl, bvh.wgsl and spheres.wgsl).
+/// The pass's own WGSL (after common/*.wgsl, bvh.wgsl and spheres.wgsl).
 pub const TRACE_WGSL: &str = include_str!("shaders/trace.wgsl");
 
 /// Pending secondary rays per pixel in trace.wgsl (`TRACE_STACK`, generated from this): the walk

@@ -1,5 +1,5 @@
 // bvh.wgsl — triangle BVH traversal (the twin of hybrid-cpu's `bvh.rs`; layout in `bvh.rs`,
-// `TriangleBvhGpu`). Needs common.wgsl before it. Group 1, bindings 0 and 1.
+// `TriangleBvhGpu`). Needs common/*.wgsl before it. Group 1, bindings 0 and 1.
 
 struct BvhNode {
     min: vec4<f32>, // w = bits of first: inner → first child (second at +1), leaf → first slot

@@ -1,4 +1,4 @@
-// capsule.wgsl — paper 2's RT-scene capsule as one compute pass (8×8), after common.wgsl and
+// capsule.wgsl — paper 2's RT-scene capsule as one compute pass (8×8), after common/*.wgsl and
 // spheres.wgsl: per pixel the CPU capsule's primary ray (hybrid_cpu::capsule::RayGen, from the
 // frame's `raygen_*` uniforms, operation for operation), the closest sphere, its Blinn–Phong
 // shading with the scene's lights and ambient, block D (reversed-Z depth from t) and block P

@@ -1,5 +1,5 @@
 // lighting.wgsl — stage 1b, deferred lighting (listing 5; hybrid_cpu::lighting::deferred_lighting).
-// common.wgsl is prepended. One invocation per pixel: the sky along the pixel's primary ray where
+// common/*.wgsl is prepended. One invocation per pixel: the sky along the pixel's primary ray where
 // no object was drawn, else emission + env_ambient · ambient + Σ lights Blinn–Phong (unshadowed).
 
 @group(1) @binding(0) var g_position: texture_2d<f32>;

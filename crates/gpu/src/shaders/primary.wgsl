@@ -1,7 +1,7 @@
 // primary.wgsl — the rt-only mode's G-buffer from primary rays (hybrid-cpu's `rt_only_gbuffer`):
 // one full-screen triangle; each fragment traces its pixel centre's ray through the triangle BVH
 // and writes the raster pass's 8 targets and the hit's reversed-Z depth, or discards on a miss.
-// Needs common.wgsl and bvh.wgsl before it.
+// Needs common/*.wgsl and bvh.wgsl before it.
 
 @vertex
 fn primary_vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {

@@ -1,4 +1,4 @@
-// raster.wgsl — stage 1, the G-buffer fill (hybrid_cpu::raster). common.wgsl is prepended.
+// raster.wgsl — stage 1, the G-buffer fill (hybrid_cpu::raster). common/*.wgsl is prepended.
 //
 // Vertex pulling: no vertex buffers; `draw(0..3 * triangle_count)`, vertex `vi` is corner
 // `vi % 3` of triangle `vi / 3` (group 0's `triangles` / `vertices`). The fragment shader

@@ -1,7 +1,7 @@
 // spheres.wgsl — the RT-scene's spheres (every point of every point cloud) as group 2: a BVH2
 // built on the CPU (`spheres.rs`, `SpheresGpu`) and the WGSL twins of hybrid-cpu's sphere code
 // (`spheres.rs`: the perpendicular-distance ray–sphere test, ties to the lower index;
-// `capsule.rs`: a sphere's surface). Used after common.wgsl (Surface, Ray, frame).
+// `capsule.rs`: a sphere's surface). Used after common/*.wgsl (Surface, Ray, frame).
 
 struct SphereInfo {
     count: u32,   // spheres

@@ -1,6 +1,6 @@
 // trace.wgsl — stage 3 (paper 1 listings 8a–d), the twin of hybrid-cpu's `trace.rs`
 // (`trace_with_spheres`: the RT-scene's spheres block shadow rays and are seen by secondary
-// rays). Needs common.wgsl, bvh.wgsl (group 1) and spheres.wgsl (group 2) before it. Three entry points, one compute pass each: shadow,
+// rays). Needs common/*.wgsl, bvh.wgsl (group 1) and spheres.wgsl (group 2) before it. Three entry points, one compute pass each: shadow,
 // reflection, refraction, over every pixel (pixels with mask 0 get 1 / 0 / 0).
 //
 // WGSL has no recursion: listing 8c's tree of secondary rays is walked with a small stack of

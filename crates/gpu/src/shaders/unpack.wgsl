@@ -1,4 +1,4 @@
-// unpack.wgsl — paper 2's block U as a full-screen pass, after common.wgsl: each fragment reads
+// unpack.wgsl — paper 2's block U as a full-screen pass, after common/*.wgsl: each fragment reads
 // its packed RGBA16UI texel, discards alpha ≤ 0.1, decodes the colour (sRGB → linear) and the
 // depth, and writes the RT surface to the G-buffer (hybrid_cpu::raster::rt_surface: emission =
 // colour, opaque, IOR 1, position unprojected, normal towards the camera, object RT_SCENE_OBJECT)
