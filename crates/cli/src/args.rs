@@ -33,7 +33,8 @@ pub enum Command {
 
 #[derive(Debug, Args)]
 pub struct ViewArgs {
-    /// Scene file (TOML). Without one, the built-in demo scene opens.
+    /// Scene file (TOML), or a model file (.gltf/.glb/.obj/.ply/.las/.laz) opened in a default
+    /// scene. Without one, the built-in demo scene opens.
     pub scene: Option<PathBuf>,
     /// Initial window size as WIDTHxHEIGHT (frames render at the window's size: larger windows
     /// show more detail at the cost of frame time).
