@@ -79,10 +79,11 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     }
     if !args.quiet {
         eprintln!(
-            "bench {name}: {}x{}, {} static frames, modes {}",
+            "bench {name}: {}x{}, {} static frame{}, modes {}",
             args.size.0,
             args.size.1,
             args.frames,
+            if args.frames == 1 { "" } else { "s" },
             modes.iter().map(|m| m.name()).collect::<Vec<_>>().join(",")
         );
     }
@@ -298,5 +299,14 @@ mod tests {
         assert_eq!(lines[1].split(',').count(), cols);
         assert!(lines[1].starts_with("path,hybrid,0,0,2.000,"));
         assert!(lines[1].ends_with(",0.01230"));
+    }
+
+    #[test]
+    fn each_mode_has_its_own_colour_in_every_chart() {
+        let modes = [Mode::Hybrid, Mode::All, Mode::RtOnly, Mode::Raster];
+        let colours: std::collections::BTreeSet<usize> = modes.iter().map(|&m| mode_color(m)).collect();
+        assert_eq!(colours.len(), modes.len());
+        // The trace-stage line (colour 4) is none of them.
+        assert!(!colours.contains(&4));
     }
 }

@@ -100,6 +100,16 @@ pub(super) fn sweep_csv(points: &[SweepPoint]) -> String {
     s
 }
 
+/// The palette colour of a mode's line, the same in every chart.
+pub(super) fn mode_color(mode: Mode) -> usize {
+    match mode {
+        Mode::Hybrid => 0,
+        Mode::All => 1,
+        Mode::RtOnly => 2,
+        Mode::Raster => 3,
+    }
+}
+
 pub(super) fn frame_time_chart(name: &str, static_passes: &[(Mode, Pass)], path_passes: &[(Mode, Pass)], scene: &Scene) -> Chart<'static> {
     let on_path = !path_passes.is_empty();
     let passes = if on_path { path_passes } else { static_passes };
@@ -110,6 +120,7 @@ pub(super) fn frame_time_chart(name: &str, static_passes: &[(Mode, Pass)], path_
             name: m.name().to_string(),
             points: p.records.iter().map(|r| (x(r), r.timings.frame)).collect(),
             markers: p.records.len() < 40 || *m == Mode::RtOnly,
+            color: mode_color(*m),
         })
         .collect();
     let hline = match scene.heuristic.budget {
@@ -121,7 +132,7 @@ pub(super) fn frame_time_chart(name: &str, static_passes: &[(Mode, Pass)], path_
         && let Some((_, p)) = passes.iter().find(|(m, _)| *m == Mode::Hybrid)
     {
         let points = p.records.iter().map(|r| (x(r), r.timings.trace)).collect();
-        series.push(Series { name: "hybrid trace stage (RAYT)".into(), points, markers: p.records.len() < 40 });
+        series.push(Series { name: "hybrid trace stage (RAYT)".into(), points, markers: p.records.len() < 40, color: 4 });
     }
     Chart {
         title: format!("{name}: frame time {}", if on_path { "along the camera path" } else { "at the static camera" }),
@@ -138,7 +149,7 @@ pub(super) fn sweep_chart(name: &str, points: &[SweepPoint]) -> Chart<'static> {
         .map(|&policy| {
             let pts: Vec<(f64, f64)> =
                 points.iter().filter(|p| p.policy == policy).filter_map(|p| p.mean_flip.map(|f| (p.mean_frame_ms, f))).collect();
-            Series { name: format!("policy {policy}"), points: pts, markers: true }
+            Series { name: format!("policy {policy}"), points: pts, markers: true, color: if policy == "paper" { 0 } else { 1 } }
         })
         .collect();
     Chart {

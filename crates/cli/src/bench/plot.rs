@@ -18,6 +18,9 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     /// Draw a dot on every point (for sparse data such as the budget sweep).
     pub markers: bool,
+    /// Index into the palette: fixed per meaning (a mode, a policy), so a mode keeps its colour
+    /// whatever `--modes` asks for and in what order.
+    pub color: usize,
 }
 
 /// A horizontal reference line (e.g. the millisecond budget).
@@ -81,8 +84,8 @@ fn draw(chart: &Chart) -> Result<Vec<u8>, String> {
             .axis_desc_style(("sans-serif", 16))
             .draw()
             .map_err(|e| e.to_string())?;
-        for (i, s) in chart.series.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
+        for s in &chart.series {
+            let color = Palette99::pick(s.color).to_rgba();
             ctx.draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(2)))
                 .map_err(|e| e.to_string())?
                 .label(s.name.as_str())
@@ -131,7 +134,7 @@ mod tests {
             title: "t".into(),
             x_label: "x",
             y_label: "y",
-            series: vec![Series { name: "a".into(), points: vec![(0.0, 1.0), (1.0, 2.0)], markers: true }],
+            series: vec![Series { name: "a".into(), points: vec![(0.0, 1.0), (1.0, 2.0)], markers: true, color: 0 }],
             hline: Some(HLine { name: "budget".into(), y: 1.5 }),
         };
         let rgb = draw(&chart).unwrap();
