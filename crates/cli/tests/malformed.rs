@@ -128,6 +128,13 @@ fn special_files_are_refused() {
         std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
         let err = assert_rejected(&link, "cpu");
         assert!(err.contains("not a file") || err.contains("not a regular file"), "{err}");
+        // The same file given as a bare model (`hybrid render zero.ply`): refused before the PLY
+        // header is sniffed for faces.
+        let o =
+            hybrid(&["render", link.to_str().unwrap(), "--quiet", "--backend", "cpu", "-o", dir.path().join("o.png").to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{name} as a bare model: {err}");
+        assert!(err.contains("not a regular file") && err.contains(name), "{name} as a bare model: {err}");
     }
 }
 

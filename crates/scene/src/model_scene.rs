@@ -6,12 +6,12 @@
 // The public API returns the crate's `SceneError` by value, like `load_scene`.
 #![allow(clippy::result_large_err)]
 
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Component, Path, PathBuf};
 
 use glam::Vec3;
 
-use crate::load::{load_model, load_point_cloud};
+use crate::load::{MAX_MODEL_BYTES, check_file, load_model, load_point_cloud};
 use crate::model::Aabb;
 use crate::{Scene, SceneError, load_scene, parse_scene};
 
@@ -45,12 +45,18 @@ pub fn input_kind(path: &Path) -> Result<InputKind, SceneError> {
     }
 }
 
-/// Whether a PLY file's header declares at least one face.
+/// Largest PLY header read while looking for its face element.
+const MAX_PLY_HEADER_BYTES: u64 = 64 << 10;
+
+/// Whether a PLY file's header declares at least one face. The file is checked as the loaders
+/// check it (a regular file within the model size limit: `/dev/zero` behind a `.ply` name is
+/// refused, not read), and at most [`MAX_PLY_HEADER_BYTES`] of it are read.
 fn ply_has_faces(path: &Path) -> Result<bool, SceneError> {
+    check_file(path, "PLY file", MAX_MODEL_BYTES)?;
     let file = std::fs::File::open(path).map_err(|e| SceneError::new(path, format!("cannot read PLY file: {e}")))?;
-    let mut reader = BufReader::new(file);
+    let mut reader = BufReader::new(file.take(MAX_PLY_HEADER_BYTES));
     let mut line = Vec::new();
-    // A header is a few hundred bytes; stop after 1000 lines so a garbage file cannot hang us.
+    // A header is a few hundred bytes; stop after 1000 lines (or the byte cap) on a garbage file.
     for _ in 0..1000 {
         line.clear();
         let n = reader.read_until(b'\n', &mut line).map_err(|e| SceneError::new(path, format!("cannot read PLY file: {e}")))?;
