@@ -140,8 +140,6 @@ struct State<'s> {
     device: wgpu::Device,
     queue: wgpu::Queue,
     config: wgpu::SurfaceConfiguration,
-    /// The swapchain format encodes sRGB itself, so the blit decodes the frame's bytes first.
-    decode_srgb: bool,
     blit: Blit,
     renderer: Renderer<'s>,
     /// CPU backend: the uploaded frame.
@@ -253,13 +251,13 @@ impl<'s> App<'s> {
             }
             self.options.backend == BackendChoice::Gpu || hardware
         });
-        let (device, queue, renderer, backend_name) = match ctx {
+        let (device, queue, adapter, renderer, backend_name) = match ctx {
             Some(ctx) => {
                 let mut r = GpuRenderer::new(ctx.clone(), self.scene).map_err(|e| ViewError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = self.options.clip_capsule;
                 r.spheres_in_trace = self.options.sphere_effects;
                 let name = format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend);
-                (ctx.device.clone(), ctx.queue.clone(), Renderer::Gpu(Box::new(r)), name)
+                (ctx.device.clone(), ctx.queue.clone(), ctx.adapter.clone(), Renderer::Gpu(Box::new(r)), name)
             }
             None => {
                 let adapter = pollster::block_on(
@@ -273,20 +271,11 @@ impl<'s> App<'s> {
                 let mut r = CpuRenderer::new(self.scene).map_err(|e| ViewError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = self.options.clip_capsule;
                 r.spheres_in_trace = self.options.sphere_effects;
-                (device, queue, Renderer::Cpu(Box::new(r)), "cpu".to_string())
+                (device, queue, adapter, Renderer::Cpu(Box::new(r)), "cpu".to_string())
             }
         };
-        let adapter_caps = {
-            // The surface's formats as seen by the device's adapter.
-            let adapter = match &renderer {
-                Renderer::Gpu(r) => r.context().adapter.clone(),
-                Renderer::Cpu(_) => pollster::block_on(
-                    instance.request_adapter(&wgpu::RequestAdapterOptions { compatible_surface: Some(&surface), ..Default::default() }),
-                )
-                .map_err(|e| ViewError::failure(format!("no graphics adapter can draw into the window: {e}")))?,
-            };
-            surface.get_capabilities(&adapter)
-        };
+        // The surface's formats as seen by the device's adapter.
+        let adapter_caps = surface.get_capabilities(&adapter);
         let format = adapter_caps
             .formats
             .iter()
@@ -311,14 +300,14 @@ impl<'s> App<'s> {
         }
         let blit = Blit::new(&device, format);
         eprintln!("backend: {backend_name}");
-        Ok(State { window, surface, device, queue, config, decode_srgb: format.is_srgb(), blit, renderer, upload: None, backend_name })
+        Ok(State { window, surface, device, queue, config, blit, renderer, upload: None, backend_name })
     }
 
     /// Key input from the window or the script. `name` is one of [`script::KEYS`].
-    fn key(&mut self, event_loop: &ActiveEventLoop, name: &str, down: bool, ctrl: bool) {
+    fn key(&mut self, event_loop: &ActiveEventLoop, name: &str, down: bool) {
         let mv = match name {
             "w" => Some(MoveKey::Forward),
-            "s" if !ctrl => Some(MoveKey::Back),
+            "s" => Some(MoveKey::Back),
             "a" => Some(MoveKey::Left),
             "d" => Some(MoveKey::Right),
             "e" => Some(MoveKey::Up),
@@ -387,11 +376,11 @@ impl<'s> App<'s> {
         }
         while let Some(ev) = self.script.as_mut().and_then(|s| s.next()) {
             match ev {
-                Event::KeyDown(k) => self.key(event_loop, &k, true, false),
-                Event::KeyUp(k) => self.key(event_loop, &k, false, false),
+                Event::KeyDown(k) => self.key(event_loop, &k, true),
+                Event::KeyUp(k) => self.key(event_loop, &k, false),
                 Event::Press(k) => {
-                    self.key(event_loop, &k, true, false);
-                    self.key(event_loop, &k, false, false);
+                    self.key(event_loop, &k, true);
+                    self.key(event_loop, &k, false);
                 }
                 Event::MouseDrag(dx, dy) => {
                     self.fly.look(dx, dy);
@@ -541,7 +530,7 @@ impl<'s> App<'s> {
         };
         let target = surface_texture.texture.create_view(&wgpu::TextureViewDescriptor::default());
         let mut enc = state.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("view.present") });
-        state.blit.encode(&state.device, &mut enc, &src_view, &target, (w, h), state.decode_srgb);
+        state.blit.encode(&state.device, &mut enc, &src_view, &target, (w, h));
         state.queue.submit([enc.finish()]);
         state.queue.present(surface_texture);
         self.frames += 1;
@@ -606,7 +595,7 @@ impl ApplicationHandler for App<'_> {
                 if let PhysicalKey::Code(code) = event.physical_key
                     && let Some(name) = key_name(code)
                 {
-                    self.key(event_loop, name, event.state == ElementState::Pressed, false);
+                    self.key(event_loop, name, event.state == ElementState::Pressed);
                     if let Some(s) = &self.state {
                         s.window.request_redraw();
                     }

@@ -9,6 +9,8 @@ use wgpu::util::DeviceExt;
 pub struct Blit {
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
+    /// The swapchain format encodes sRGB itself, so the frame's bytes are decoded first.
+    decode_srgb: bool,
 }
 
 const SHADER: &str = r#"
@@ -91,7 +93,7 @@ impl Blit {
             multiview_mask: None,
             cache: None,
         });
-        Self { pipeline, layout }
+        Self { pipeline, layout, decode_srgb: target_format.is_srgb() }
     }
 
     /// Records the draw of `src` over the whole of `target` (`target_size` pixels).
@@ -102,9 +104,8 @@ impl Blit {
         src: &wgpu::TextureView,
         target: &wgpu::TextureView,
         target_size: (u32, u32),
-        decode_srgb: bool,
     ) {
-        let params: [f32; 4] = [target_size.0 as f32, target_size.1 as f32, if decode_srgb { 1.0 } else { 0.0 }, 0.0];
+        let params: [f32; 4] = [target_size.0 as f32, target_size.1 as f32, if self.decode_srgb { 1.0 } else { 0.0 }, 0.0];
         let bytes: Vec<u8> = params.iter().flat_map(|v| v.to_le_bytes()).collect();
         let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("view.blit.params"),
