@@ -174,3 +174,120 @@ fn no_display_is_a_clear_error() {
     assert!(err.contains("hybrid render") && err.contains("display"), "{err}");
     assert_eq!(err.matches("error:").count(), 1, "{err}");
 }
+
+/// `print-selection` lines: (budget, selected object ids).
+fn selections(out: &Output) -> Vec<(String, Vec<u64>)> {
+    stdout(out)
+        .lines()
+        .filter_map(|l| l.strip_prefix("selection: budget "))
+        .map(|l| {
+            let budget = l.split_whitespace().next().unwrap().to_string();
+            let ids = l.split('[').nth(1).unwrap().trim_end_matches(']');
+            (budget, ids.split(',').filter(|s| !s.is_empty()).map(|s| s.parse().unwrap()).collect())
+        })
+        .collect()
+}
+
+/// Changing the budget (the overlay's slider sends the same action as `set budget`) changes the
+/// selected set, and the set is the one the heuristic's report gives for that frame.
+#[test]
+fn budget_change_changes_the_selection_as_the_report_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    let args = [scene.to_str().unwrap(), "--backend", "cpu", "--size", "128x72"];
+    let out = view(dir.path(), &args, "wait 2\nprint-selection\nscreenshot all.png\nquit\n");
+    let all = selections(&out);
+    assert_eq!(all.len(), 1, "{}", stdout(&out));
+    assert_eq!(all[0].0, "unlimited");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("all.json")).unwrap()).unwrap();
+    let objects = report["heuristic"]["objects"].as_array().unwrap();
+    let total: f64 = objects.iter().map(|o| o["C"].as_f64().unwrap()).sum();
+    assert_eq!(all[0].1.len(), objects.len(), "unlimited selects every visible object");
+    assert!(objects.len() >= 3, "{report}");
+
+    let budget = (total / 3.0).round();
+    let script = format!("wait 2\nset budget {budget}\nwait 3\nprint-selection\nscreenshot third.png\nquit\n");
+    let out = view(dir.path(), &args, &script);
+    let sel = selections(&out);
+    assert_eq!(sel.len(), 1, "{}", stdout(&out));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("third.json")).unwrap()).unwrap();
+    let h = &report["heuristic"];
+    assert_eq!(h["budget"].as_f64(), Some(budget), "{h}");
+    let reported: Vec<u64> =
+        h["objects"].as_array().unwrap().iter().filter(|o| o["selected"] == true).map(|o| o["id"].as_u64().unwrap()).collect();
+    assert_eq!(sel[0].1, reported, "the viewer's selection is the report's");
+    assert!(!reported.is_empty() && reported.len() < objects.len(), "a third of the cost selects some, not all: {reported:?}");
+    assert!(h["spent"].as_f64().unwrap() <= budget, "{h}");
+}
+
+/// K records keyframes and Ctrl+S writes them beside the scene (a new file, the scene untouched);
+/// P plays the scene's camera path from its first keyframe; F frames the scene; O orbits around
+/// the surface under the cursor, keeping the distance.
+#[test]
+fn keys_record_and_save_a_path_play_it_frame_and_orbit() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_text = std::fs::read_to_string(scenes().join("demo.toml")).unwrap();
+    let scene = dir.path().join("room.toml");
+    std::fs::write(&scene, &scene_text).unwrap();
+    let script = "press k\nkey-down w\nwait 15\nkey-up w\npress k\npress ctrl+s\npress ctrl+s\n\
+                  press p\nwait 1\nprint-camera\npress p\n\
+                  press f\nprint-camera\n\
+                  mouse-move 64 36\npress o\nprint-camera\nmouse-drag 80 0\nprint-camera\nquit\n";
+    let out = view(dir.path(), &[scene.to_str().unwrap(), "--backend", "cpu", "--size", "128x72"], script);
+    let err = String::from_utf8_lossy(&out.stderr);
+    // Two saves: two files, numbered; the scene file is unchanged.
+    for name in ["room-path.toml", "room-path-2.toml"] {
+        let saved = std::fs::read_to_string(dir.path().join(name)).unwrap_or_else(|e| panic!("{name}: {e}\n{err}"));
+        assert_eq!(saved.matches("[[camera_path.keyframe]]").count(), 2, "{saved}");
+        assert!(err.contains(name), "the viewer says where it wrote the path: {err}");
+    }
+    assert_eq!(std::fs::read_to_string(&scene).unwrap(), scene_text);
+    let c = cameras(&out);
+    assert_eq!(c.len(), 4, "{}", stdout(&out));
+    // P: the first played frame is the path's first keyframe (demo.toml: [0, 2.4, 7.5] → [0, 1, -1]).
+    assert_eq!(c[0], [0.0, 2.4, 7.5, 0.0, 1.0, -1.0]);
+    // F: looks at the middle of the scene's objects from the same direction.
+    assert_ne!(c[1], c[0]);
+    let (p1, t1) = (glam::Vec3::from_slice(&c[1][..3]), glam::Vec3::from_slice(&c[1][3..]));
+    let (p0, t0) = (glam::Vec3::from_slice(&c[0][..3]), glam::Vec3::from_slice(&c[0][3..]));
+    assert!((t1 - p1).normalize().dot((t0 - p0).normalize()) > 0.9999);
+    // O: the pivot is the surface under the cursor (printed), the drag keeps the distance to it.
+    let orbit: Vec<f32> = stdout(&out)
+        .lines()
+        .find_map(|l| l.strip_prefix("orbit: around "))
+        .expect("O prints its pivot")
+        .split_whitespace()
+        .map(|w| w.parse().unwrap())
+        .collect();
+    let pivot = glam::Vec3::from_slice(&orbit);
+    let (p2, t2) = (glam::Vec3::from_slice(&c[2][..3]), glam::Vec3::from_slice(&c[2][3..]));
+    let (p3, t3) = (glam::Vec3::from_slice(&c[3][..3]), glam::Vec3::from_slice(&c[3][3..]));
+    assert_eq!(t2, pivot);
+    assert_eq!(t3, pivot);
+    assert_ne!(p3, p2, "the drag moved the camera");
+    assert!(((p3 - pivot).length() - (p2 - pivot).length()).abs() < 1e-3);
+}
+
+/// A file that fails to open leaves the open scene (error on stderr and in the overlay); a good
+/// one replaces it (as dropping it on the window does). A light switched off leaves the frame.
+#[test]
+fn open_keeps_the_scene_on_a_bad_file_and_lights_switch_off() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    std::fs::write(dir.path().join("broken.obj"), "v 0 0 0\nv 1 0 0\nf 1 2 7\n").unwrap();
+    std::fs::write(dir.path().join("tet.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n").unwrap();
+    let script = "wait 1\nset light 1 off\nwait 1\nscreenshot dark.png\nopen broken.obj\nwait 1\nscreenshot still.png\n\
+                  open tet.obj\nwait 2\nscreenshot tet.png\nquit\n";
+    let out = view(dir.path(), &[scene.to_str().unwrap(), "--backend", "cpu", "--size", "96x64"], script);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("cannot open broken.obj"), "{err}");
+    assert!(err.contains("opened tet.obj"), "{err}");
+    let report = |name: &str| -> serde_json::Value { serde_json::from_slice(&std::fs::read(dir.path().join(name)).unwrap()).unwrap() };
+    let demo_objects = report("dark.json")["objects"].clone();
+    assert_eq!(report("dark.json")["heuristic"]["lights"], 2, "the demo's 3 lights, one off");
+    assert_eq!(report("still.json")["objects"], demo_objects, "the demo stays open after the bad file");
+    // The tetrahedron's default scene: the model and a ground plane, one sun.
+    let tet = report("tet.json");
+    assert_eq!(tet["objects"], 2, "{tet}");
+    assert_eq!(tet["heuristic"]["lights"], 1, "{tet}");
+}

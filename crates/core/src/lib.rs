@@ -4,6 +4,7 @@
 //! they must agree on lives here, once.
 
 pub mod blend;
+pub mod buffer_view;
 pub mod buffers;
 pub mod depth_merge;
 pub mod frame;

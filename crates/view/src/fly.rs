@@ -108,6 +108,26 @@ impl Fly {
     }
 }
 
+impl Fly {
+    /// Turns the camera around `pivot` by a mouse drag of (`dx`, `dy`) pixels (yaw about the up
+    /// axis, pitch about the camera's right axis), keeping its distance to the pivot and looking
+    /// at it.
+    pub fn orbit(&mut self, pivot: Vec3, dx: f32, dy: f32) {
+        let up = self.camera.up.normalize_or(Vec3::Y);
+        let offset = self.camera.position - pivot;
+        let (_, right, _) = self.basis();
+        let yaw = Quat::from_axis_angle(up, -dx * LOOK_PER_PIXEL);
+        let mut o = yaw * offset;
+        let pitched = Quat::from_axis_angle(yaw * right, -dy * LOOK_PER_PIXEL) * o;
+        // Stop short of the poles, where the up vector and the view direction meet.
+        if pitched.normalize_or(Vec3::Y).dot(up).abs() < 0.99 {
+            o = pitched;
+        }
+        self.camera.position = pivot + o;
+        self.camera.target = pivot;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -143,5 +163,19 @@ mod tests {
         let mut f = Fly::new(Camera::default(), 1.0);
         f.scroll(2.0);
         assert!((f.speed - SCROLL_FACTOR * SCROLL_FACTOR).abs() < 1e-5);
+    }
+
+    #[test]
+    fn orbit_keeps_the_distance_to_the_pivot_and_looks_at_it() {
+        let mut f = Fly::new(Camera::default(), 1.0);
+        let pivot = Vec3::new(0.5, 0.0, -1.0);
+        let d0 = (f.camera.position - pivot).length();
+        f.orbit(pivot, 120.0, -40.0);
+        assert!(((f.camera.position - pivot).length() - d0).abs() < 1e-4);
+        assert_eq!(f.camera.target, pivot);
+        // A quarter turn of yaw: 393 px at 0.004 rad/px ≈ π/2, the offset turns about Y.
+        let mut g = Fly::new(Camera { position: Vec3::new(0.0, 0.0, 5.0), target: Vec3::ZERO, ..Camera::default() }, 1.0);
+        g.orbit(Vec3::ZERO, std::f32::consts::FRAC_PI_2 / LOOK_PER_PIXEL, 0.0);
+        assert!((g.camera.position - Vec3::new(-5.0, 0.0, 0.0)).length() < 1e-3, "{}", g.camera.position);
     }
 }

@@ -6,29 +6,42 @@
 //!   camera moves, frames render at a reduced resolution chosen to hold `--target-ms`, and the
 //!   full-size frame follows when it stops.
 //!
+//! An egui overlay ([`overlay`]) shows the frame's statistics and heuristic and holds every live
+//! knob; keys and overlay controls become [`action::Action`]s applied in one place.
 //! `--script FILE` drives the window with events from a file (see [`script`]) for tests and demos.
 
+pub mod action;
 pub mod fly;
+pub mod open_scene;
+pub mod overlay;
+pub mod path_record;
 pub mod present;
 pub mod script;
 
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use hybrid_core::{Frame, FrameSettings, Mode};
-use hybrid_cpu::frame::CpuRenderer;
+use glam::Vec3;
+use hybrid_core::buffer_view::{self, BufferKind, FrameView};
+use hybrid_core::report::FrameReport;
+use hybrid_core::{FrameSettings, Mode, NO_OBJECT, RT_SCENE_OBJECT};
+use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_gpu::GpuContext;
-use hybrid_gpu::frame::GpuRenderer;
-use hybrid_scene::{Budget, Policy, Scene, demo_scene, load_scene_or_model};
+use hybrid_scene::{Aabb, Budget, Camera, CameraPath, HeuristicSettings, Lights, Policy, Scene, demo_scene, load_scene_or_model};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, EventLoop};
-use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
 use winit::window::{Window, WindowId};
 
+use crate::action::Action;
 use crate::fly::{Fly, MoveKey};
+use crate::open_scene::{OpenScene, Renderer, RendererKnobs, frame_bounds, framed, light_names, lights_switched};
+use crate::overlay::{HISTORY_FRAMES, Overlay, OverlayModel, Sample};
+use crate::path_record::PathRecorder;
 use crate::present::{Blit, Upload};
 use crate::script::Event;
 
@@ -107,19 +120,13 @@ pub fn run(options: ViewOptions) -> Result<(), ViewError> {
         }
         None => None,
     };
-    let mut scene = match &options.scene {
+    let scene = match &options.scene {
         Some(path) => load_scene_or_model(path).map_err(|e| ViewError::bad_input(e.to_string()))?,
         None => demo_scene(),
     };
-    if let Some(b) = options.budget {
-        scene.heuristic.budget = b;
-    }
-    if let Some(p) = options.policy {
-        scene.heuristic.policy = p;
-    }
     let event_loop = EventLoop::new()
         .map_err(|e| ViewError::bad_input(format!("cannot open a window ({e}); render to a file with `hybrid render` instead")))?;
-    let mut app = App::new(&scene, options, script);
+    let mut app = App::new(scene, options, script);
     event_loop.run_app(&mut app).map_err(|e| ViewError::failure(format!("the window's event loop failed: {e}")))?;
     match app.error.take() {
         Some(e) => Err(e),
@@ -127,50 +134,102 @@ pub fn run(options: ViewOptions) -> Result<(), ViewError> {
     }
 }
 
-/// A renderer on the backend in use, borrowing the open scene.
-enum Renderer<'s> {
-    Cpu(Box<CpuRenderer<'s>>),
-    Gpu(Box<GpuRenderer<'s>>),
-}
-
 /// Everything that exists once the window does.
-struct State<'s> {
+struct Gfx {
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
     device: wgpu::Device,
     queue: wgpu::Queue,
     config: wgpu::SurfaceConfiguration,
     blit: Blit,
-    renderer: Renderer<'s>,
-    /// CPU backend: the uploaded frame.
+    overlay: Overlay,
+    /// The GPU backend's context (`None` on the CPU backend), kept to build renderers for newly
+    /// opened scenes.
+    gpu: Option<Arc<GpuContext>>,
+    /// Frames from the host: the CPU backend's image, or a buffer view.
     upload: Option<Upload>,
+    /// The uploaded frame's object ids (for the highlight).
+    ids_upload: Option<Upload>,
     /// Backend name and adapter, for messages.
     backend_name: String,
+    /// The first error the device reported outside an error scope, or its loss: the viewer
+    /// stops with it instead of wgpu's default panic.
+    device_error: Arc<Mutex<Option<String>>>,
 }
 
-struct App<'s> {
-    scene: &'s Scene,
+/// What the open scene offers besides its renderer, kept for keys and the overlay.
+struct SceneInfo {
+    /// File it came from (`None`: the built-in demo).
+    path: Option<PathBuf>,
+    camera: Camera,
+    camera_path: Option<CameraPath>,
+    bounds: Option<Aabb>,
+    has_point_clouds: bool,
+    /// Every light of the file; `lights_on` says which are in the rendered scene.
+    all_lights: Lights,
+    lights_on: Vec<bool>,
+    light_names: Vec<String>,
+}
+
+impl SceneInfo {
+    fn of(scene: &Scene, path: Option<PathBuf>) -> Self {
+        Self {
+            path,
+            camera: scene.camera,
+            camera_path: scene.camera_path.clone(),
+            bounds: frame_bounds(scene),
+            has_point_clouds: !scene.point_clouds.is_empty(),
+            all_lights: scene.lights.clone(),
+            lights_on: vec![true; scene.lights.count()],
+            light_names: light_names(&scene.lights),
+        }
+    }
+}
+
+struct App {
     options: ViewOptions,
-    state: Option<State<'s>>,
+    /// The scene loaded before the window opened (moved into `open` once it exists).
+    first_scene: Option<Scene>,
+    open: Option<OpenScene>,
+    info: SceneInfo,
+    gfx: Option<Gfx>,
     fly: Fly,
+    knobs: RendererKnobs,
+    heuristic: HeuristicSettings,
+    mode: Mode,
+    buffer: BufferKind,
+    highlight: Option<u32>,
+    /// `O`: the point the camera orbits.
+    orbit: Option<Vec3>,
+    /// `P`: the time on the camera path being played.
+    playing: Option<f32>,
+    recorder: PathRecorder,
     script: Option<std::vec::IntoIter<Event>>,
     /// Frames left to let pass before the script goes on.
     wait_frames: u32,
     looking: bool,
-    last_cursor: Option<(f64, f64)>,
-    /// The camera changed since the last full-size frame.
+    /// Where the cursor is in the window (the window's centre until it moves).
+    cursor: Option<(f64, f64)>,
+    last_drag: Option<(f64, f64)>,
+    modifiers: ModifiersState,
+    /// The camera or a setting changed since the last full-size frame.
     dirty: bool,
     /// CPU backend: the shown frame is below full size.
     coarse: bool,
     /// CPU backend: fraction of the window size rendered while moving.
     scale: f32,
     last_frame: Instant,
+    /// Frames presented, and of them rendered (the CPU backend shows a still frame again).
     frames: u64,
+    rendered: u64,
+    /// Sum of the rendered frames' times (ms).
     frame_ms_sum: f64,
-    /// The last frame's render + present time (ms) and rendered size.
+    /// The last frame's whole time (render, upload, overlay, present; ms) and rendered size.
     last_ms: f64,
     last_size: (u32, u32),
-    screenshots: u32,
+    history: VecDeque<Sample>,
+    last_report: Option<FrameReport>,
+    message: Option<String>,
     error: Option<ViewError>,
 }
 
@@ -179,28 +238,58 @@ pub const SCRIPT_DT: f32 = 1.0 / 30.0;
 /// Smallest fraction of the window size the CPU backend renders at while moving.
 const MIN_SCALE: f32 = 1.0 / 16.0;
 
-impl<'s> App<'s> {
-    fn new(scene: &'s Scene, options: ViewOptions, script: Option<Vec<Event>>) -> Self {
-        let dist = (scene.camera.target - scene.camera.position).length();
-        let speed = if dist.is_finite() && dist > 1e-3 { dist * 0.5 } else { 1.0 };
+fn fly_speed(camera: &Camera) -> f32 {
+    let dist = (camera.target - camera.position).length();
+    if dist.is_finite() && dist > 1e-3 { dist * 0.5 } else { 1.0 }
+}
+
+impl App {
+    fn new(scene: Scene, options: ViewOptions, script: Option<Vec<Event>>) -> Self {
+        let mut heuristic = scene.heuristic.clone();
+        if let Some(b) = options.budget {
+            heuristic.budget = b;
+        }
+        if let Some(p) = options.policy {
+            heuristic.policy = p;
+        }
+        let info = SceneInfo::of(&scene, options.scene.clone());
         Self {
-            scene,
-            fly: Fly::new(scene.camera, speed),
+            fly: Fly::new(scene.camera, fly_speed(&scene.camera)),
+            knobs: RendererKnobs {
+                clip_capsule: options.clip_capsule,
+                sphere_effects: options.sphere_effects,
+                primary_visibility: PrimaryVisibility::Auto,
+            },
+            heuristic,
+            mode: options.mode,
+            buffer: BufferKind::Final,
+            highlight: None,
+            orbit: None,
+            playing: None,
+            recorder: PathRecorder::default(),
+            first_scene: Some(scene),
+            open: None,
+            info,
+            gfx: None,
             options,
-            state: None,
             script: script.map(|s| s.into_iter()),
             wait_frames: 0,
             looking: false,
-            last_cursor: None,
+            cursor: None,
+            last_drag: None,
+            modifiers: ModifiersState::empty(),
             dirty: true,
             coarse: false,
             scale: 0.5,
             last_frame: Instant::now(),
             frames: 0,
+            rendered: 0,
             frame_ms_sum: 0.0,
             last_ms: 0.0,
             last_size: (0, 0),
-            screenshots: 0,
+            history: VecDeque::with_capacity(HISTORY_FRAMES),
+            last_report: None,
+            message: None,
             error: None,
         }
     }
@@ -212,13 +301,22 @@ impl<'s> App<'s> {
         event_loop.exit();
     }
 
-    fn create_state(&self, event_loop: &ActiveEventLoop) -> Result<State<'s>, ViewError> {
-        let (w, h) = self.options.size;
-        let title = match &self.options.scene {
+    /// Tells the user something in the overlay and on stderr.
+    fn say(&mut self, msg: String) {
+        eprintln!("{msg}");
+        self.message = Some(msg);
+    }
+
+    fn title(&self) -> String {
+        match &self.info.path {
             Some(p) => format!("hybrid view: {}", p.display()),
             None => "hybrid view: demo scene".into(),
-        };
-        let attrs = Window::default_attributes().with_title(title).with_inner_size(PhysicalSize::new(w, h));
+        }
+    }
+
+    fn create_gfx(&self, event_loop: &ActiveEventLoop) -> Result<Gfx, ViewError> {
+        let (w, h) = self.options.size;
+        let attrs = Window::default_attributes().with_title(self.title()).with_inner_size(PhysicalSize::new(w, h));
         let window = Arc::new(
             event_loop
                 .create_window(attrs)
@@ -229,7 +327,6 @@ impl<'s> App<'s> {
         let instance = wgpu::Instance::new(desc.with_env());
         let surface =
             instance.create_surface(window.clone()).map_err(|e| ViewError::failure(format!("cannot draw into the window: {e}")))?;
-        let file = self.options.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
         let want_gpu = self.options.backend != BackendChoice::Cpu;
         let ctx = if want_gpu {
             match GpuContext::for_surface(instance.clone(), &surface) {
@@ -251,13 +348,10 @@ impl<'s> App<'s> {
             }
             self.options.backend == BackendChoice::Gpu || hardware
         });
-        let (device, queue, adapter, renderer, backend_name) = match ctx {
+        let (device, queue, adapter, backend_name) = match &ctx {
             Some(ctx) => {
-                let mut r = GpuRenderer::new(ctx.clone(), self.scene).map_err(|e| ViewError::bad_input(format!("{file}: {e}")))?;
-                r.clip_capsule_at_raster_depth = self.options.clip_capsule;
-                r.spheres_in_trace = self.options.sphere_effects;
                 let name = format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend);
-                (ctx.device.clone(), ctx.queue.clone(), ctx.adapter.clone(), Renderer::Gpu(Box::new(r)), name)
+                (ctx.device.clone(), ctx.queue.clone(), ctx.adapter.clone(), name)
             }
             None => {
                 let adapter = pollster::block_on(
@@ -268,10 +362,7 @@ impl<'s> App<'s> {
                     adapter.request_device(&wgpu::DeviceDescriptor { label: Some("hybrid view"), ..Default::default() }),
                 )
                 .map_err(|e| ViewError::failure(format!("cannot open a device to draw into the window: {e}")))?;
-                let mut r = CpuRenderer::new(self.scene).map_err(|e| ViewError::bad_input(format!("{file}: {e}")))?;
-                r.clip_capsule_at_raster_depth = self.options.clip_capsule;
-                r.spheres_in_trace = self.options.sphere_effects;
-                (device, queue, adapter, Renderer::Cpu(Box::new(r)), "cpu".to_string())
+                (device, queue, adapter, "cpu".to_string())
             }
         };
         // The surface's formats as seen by the device's adapter.
@@ -298,9 +389,229 @@ impl<'s> App<'s> {
         if size.width > 0 && size.height > 0 {
             surface.configure(&device, &config);
         }
+        let device_error: Arc<Mutex<Option<String>>> = Arc::default();
+        let slot = device_error.clone();
+        device.on_uncaptured_error(Arc::new(move |e| {
+            if let Ok(mut s) = slot.lock() {
+                s.get_or_insert_with(|| e.to_string());
+            }
+        }));
+        let slot = device_error.clone();
+        device.set_device_lost_callback(move |reason, msg| {
+            if let Ok(mut s) = slot.lock() {
+                s.get_or_insert_with(|| format!("the device was lost ({reason:?}): {msg}"));
+            }
+        });
         let blit = Blit::new(&device, format);
+        let overlay = Overlay::new(&window, &device, format);
         eprintln!("backend: {backend_name}");
-        Ok(State { window, surface, device, queue, config, blit, renderer, upload: None, backend_name })
+        Ok(Gfx {
+            window,
+            surface,
+            device,
+            queue,
+            config,
+            blit,
+            overlay,
+            gpu: ctx,
+            upload: None,
+            ids_upload: None,
+            backend_name,
+            device_error,
+        })
+    }
+
+    /// Builds the renderer for `scene` (on the window's backend) and makes it the open scene.
+    /// On failure the scene that was open stays open.
+    fn install(&mut self, scene: Scene) -> Result<(), String> {
+        let gpu = self.gfx.as_ref().and_then(|g| g.gpu.as_ref());
+        let mut open = OpenScene::open(scene, gpu, self.knobs)?;
+        let settings = self.heuristic.clone();
+        open.with_dependent_mut(|_, r| r.heuristic_mut().set_settings(settings));
+        self.open = Some(open);
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// `open PATH` / a dropped file: the new scene replaces the open one only if it loads and its
+    /// renderer builds; otherwise the error is shown and the old scene stays.
+    fn open_file(&mut self, path: PathBuf) {
+        let scene = match load_scene_or_model(&path) {
+            Ok(s) => s,
+            Err(e) => return self.say(format!("cannot open {}: {e}", path.display())),
+        };
+        let info = SceneInfo::of(&scene, Some(path.clone()));
+        let mut heuristic = scene.heuristic.clone();
+        if let Some(b) = self.options.budget {
+            heuristic.budget = b;
+        }
+        if let Some(p) = self.options.policy {
+            heuristic.policy = p;
+        }
+        let old = std::mem::replace(&mut self.heuristic, heuristic);
+        let camera = scene.camera;
+        if let Err(e) = self.install(scene) {
+            self.heuristic = old;
+            return self.say(format!("cannot open {}: {e}", path.display()));
+        }
+        self.info = info;
+        self.fly = Fly::new(camera, fly_speed(&camera));
+        self.highlight = None;
+        self.orbit = None;
+        self.playing = None;
+        self.recorder = PathRecorder::default();
+        self.history.clear();
+        self.last_report = None;
+        if let Some(g) = &self.gfx {
+            g.window.set_title(&self.title());
+        }
+        self.say(format!("opened {}", path.display()));
+    }
+
+    /// The open scene rebuilt with the lights that are on.
+    fn relight(&mut self) -> Result<(), String> {
+        let Some(open) = self.open.take() else { return Ok(()) };
+        let mut scene = open.into_owner();
+        scene.lights = lights_switched(&self.info.all_lights, &self.info.lights_on);
+        let gpu = self.gfx.as_ref().and_then(|g| g.gpu.as_ref());
+        match OpenScene::open(scene, gpu, self.knobs) {
+            Ok(mut open) => {
+                let settings = self.heuristic.clone();
+                open.with_dependent_mut(|_, r| r.heuristic_mut().set_settings(settings));
+                self.open = Some(open);
+                self.dirty = true;
+                Ok(())
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Applies what a key, the overlay or the script asked for.
+    fn apply(&mut self, event_loop: &ActiveEventLoop, action: Action) {
+        self.dirty = true;
+        match action {
+            Action::SetMode(m) => self.mode = m,
+            Action::SetBuffer(b) => self.buffer = b,
+            Action::SetBudget(b) => self.set_heuristic(|h| h.budget = b),
+            Action::SetPolicy(p) => self.set_heuristic(|h| h.policy = p),
+            Action::SetImportance(i) => self.set_heuristic(|h| h.importance = i.max(0.0)),
+            Action::Highlight(id) => self.highlight = id,
+            Action::SetClipCapsule(v) => self.set_knobs(|k| k.clip_capsule = v),
+            Action::SetSphereEffects(v) => self.set_knobs(|k| k.sphere_effects = v),
+            Action::SetPrimaryVisibility(v) => self.set_knobs(|k| k.primary_visibility = v),
+            Action::SetLight(i, on) => {
+                if i >= self.info.lights_on.len() {
+                    return self.say(format!("light {} does not exist: the scene has {} lights", i + 1, self.info.lights_on.len()));
+                }
+                self.info.lights_on[i] = on;
+                if let Err(e) = self.relight() {
+                    self.fail(
+                        event_loop,
+                        ViewError::failure(format!("cannot rebuild the scene with light {} {}: {e}", i + 1, if on { "on" } else { "off" })),
+                    );
+                }
+            }
+            Action::FrameBounds => match self.info.bounds {
+                Some(b) => {
+                    self.fly.camera = framed(&self.fly.camera, b);
+                    self.fly.speed = fly_speed(&self.fly.camera);
+                    self.orbit = None;
+                }
+                None => self.say("the scene is empty: nothing to frame".into()),
+            },
+            Action::Home => {
+                self.fly.camera = self.info.camera;
+                self.orbit = None;
+                self.playing = None;
+            }
+            Action::ToggleOrbit => {
+                self.orbit = match self.orbit {
+                    Some(_) => None,
+                    None => {
+                        let pivot = self.point_under_cursor().unwrap_or(self.fly.camera.target);
+                        Some(pivot)
+                    }
+                };
+                if let Some(p) = self.orbit {
+                    self.fly.camera.target = p;
+                    println!("orbit: around {} {} {}", p.x, p.y, p.z);
+                }
+            }
+            Action::PlayPath => {
+                if self.playing.is_some() {
+                    self.playing = None;
+                } else if let Some(start) = self.path_to_play().map(|p| p.keyframes[0].time) {
+                    self.playing = Some(start);
+                    self.orbit = None;
+                } else {
+                    self.say("no camera path to play: the scene has no [camera_path]; record one with K".into());
+                }
+            }
+            Action::AddKeyframe => {
+                let k = *self.recorder.add(&self.fly.camera, self.fly.speed);
+                self.say(format!("keyframe {} at {:.2} s", self.recorder.keyframes.len(), k.time));
+            }
+            Action::SavePath => match self.recorder.save_beside(self.info.path.as_deref()) {
+                Ok(p) => self.say(format!("camera path: {} keyframes written to {}", self.recorder.keyframes.len(), p.display())),
+                Err(e) => self.say(format!("camera path not saved: {e}")),
+            },
+            Action::Screenshot(path) => {
+                let path = path.unwrap_or_else(next_screenshot_path);
+                if let Err(e) = self.screenshot(&path) {
+                    self.fail(event_loop, e);
+                }
+            }
+            Action::ToggleOverlay => {
+                if let Some(g) = self.gfx.as_mut() {
+                    g.overlay.visible = !g.overlay.visible;
+                }
+            }
+            Action::Open(path) => self.open_file(path),
+        }
+    }
+
+    fn set_heuristic(&mut self, f: impl FnOnce(&mut HeuristicSettings)) {
+        f(&mut self.heuristic);
+        let settings = self.heuristic.clone();
+        if let Some(open) = self.open.as_mut() {
+            open.with_dependent_mut(|_, r| r.heuristic_mut().set_settings(settings));
+        }
+    }
+
+    fn set_knobs(&mut self, f: impl FnOnce(&mut RendererKnobs)) {
+        f(&mut self.knobs);
+        let knobs = self.knobs;
+        if let Some(open) = self.open.as_mut() {
+            open.with_dependent_mut(|_, r| r.apply(knobs));
+        }
+    }
+
+    /// The scene's camera path, or the one recorded with `K` when the scene has none.
+    fn path_to_play(&self) -> Option<CameraPath> {
+        self.info
+            .camera_path
+            .clone()
+            .or_else(|| (self.recorder.keyframes.len() >= 2).then(|| CameraPath { keyframes: self.recorder.keyframes.clone() }))
+    }
+
+    /// The world position of the surface under the cursor (window centre when the cursor has not
+    /// moved), from a frame rendered for it; `None` over the sky.
+    fn point_under_cursor(&mut self) -> Option<Vec3> {
+        let g = self.gfx.as_ref()?;
+        let (w, h) = (g.config.width.max(1), g.config.height.max(1));
+        let (cx, cy) = self.cursor.unwrap_or((w as f64 * 0.5, h as f64 * 0.5));
+        let settings = FrameSettings { width: w, height: h, mode: self.mode };
+        let camera = self.fly.camera;
+        let open = self.open.as_mut()?;
+        open.with_dependent_mut(|_, r| {
+            let frame = r.render(&camera, settings).ok()?;
+            let (x, y) = ((cx.max(0.0) as u32).min(w - 1), (cy.max(0.0) as u32).min(h - 1));
+            let i = (y * w + x) as usize;
+            let id = frame.gbuffer.object_id[i];
+            let p = (id != NO_OBJECT).then_some(frame.gbuffer.position[i]);
+            r.recycle(frame);
+            p
+        })
     }
 
     /// Key input from the window or the script. `name` is one of [`script::KEYS`].
@@ -316,55 +627,62 @@ impl<'s> App<'s> {
             _ => None,
         };
         if let Some(k) = mv {
+            if k != MoveKey::Fast && down {
+                // Flying takes the camera back from the path and the orbit.
+                self.playing = None;
+                self.orbit = None;
+            }
             self.fly.key(k, down);
             return;
         }
         if !down {
             return;
         }
-        match name {
-            "r" => {
-                self.fly.camera = self.scene.camera;
-                self.dirty = true;
-            }
-            "f12" => {
-                self.screenshots += 1;
-                let path = PathBuf::from(format!("hybrid-screenshot-{}.png", self.screenshots));
-                if let Err(e) = self.screenshot(&path) {
-                    self.fail(event_loop, e);
-                }
-            }
-            _ => {}
+        let action = match name {
+            "r" => Action::Home,
+            "f" => Action::FrameBounds,
+            "o" => Action::ToggleOrbit,
+            "p" => Action::PlayPath,
+            "k" => Action::AddKeyframe,
+            "ctrl+s" => Action::SavePath,
+            "tab" => Action::ToggleOverlay,
+            "f12" => Action::Screenshot(None),
+            _ => return,
+        };
+        self.apply(event_loop, action);
+    }
+
+    /// A right-button drag: look around, or orbit the pivot in orbit mode.
+    fn drag(&mut self, dx: f32, dy: f32) {
+        match self.orbit {
+            Some(p) => self.fly.orbit(p, dx, dy),
+            None => self.fly.look(dx, dy),
         }
+        self.playing = None;
+        self.dirty = true;
     }
 
     /// Renders the current camera at the full window size (read back, no overlay) and writes it
     /// as PNG, with the frame's report as JSON beside it (same name, `.json`).
     fn screenshot(&mut self, path: &Path) -> Result<(), ViewError> {
-        let Some(state) = self.state.as_mut() else { return Ok(()) };
-        let (w, h) = (state.config.width, state.config.height);
-        let settings = FrameSettings { width: w, height: h, mode: self.options.mode };
-        let frame: Frame = match &mut state.renderer {
-            Renderer::Cpu(r) => r.render(&self.fly.camera, settings, &mut |_| {}),
-            Renderer::Gpu(r) => r.render(&self.fly.camera, settings, &mut |_| {}).map_err(|e| ViewError::failure(e.to_string()))?,
-        };
+        let Some(g) = self.gfx.as_ref() else { return Ok(()) };
+        let (w, h) = (g.config.width, g.config.height);
+        let settings = FrameSettings { width: w, height: h, mode: self.mode };
+        let camera = self.fly.camera;
+        let Some(open) = self.open.as_mut() else { return Ok(()) };
+        let (pixels, report) = open.with_dependent_mut(|_, r| -> Result<_, ViewError> {
+            let frame = r.render(&camera, settings).map_err(ViewError::failure)?;
+            let out = (frame.buffers.final_srgb.as_flattened().to_vec(), frame.report.clone());
+            r.recycle(frame);
+            Ok(out)
+        })?;
         let report_path = path.with_extension("json");
-        let json = serde_json::to_vec_pretty(&frame.report).map_err(|e| ViewError::failure(e.to_string()))?;
-        image::save_buffer_with_format(
-            path,
-            frame.buffers.final_srgb.as_flattened(),
-            w,
-            h,
-            image::ExtendedColorType::Rgba8,
-            image::ImageFormat::Png,
-        )
-        .map_err(|e| ViewError::failure(format!("{}: cannot write the screenshot: {e}", path.display())))?;
+        let json = serde_json::to_vec_pretty(&report).map_err(|e| ViewError::failure(e.to_string()))?;
+        image::save_buffer_with_format(path, &pixels, w, h, image::ExtendedColorType::Rgba8, image::ImageFormat::Png)
+            .map_err(|e| ViewError::failure(format!("{}: cannot write the screenshot: {e}", path.display())))?;
         std::fs::write(&report_path, json)
             .map_err(|e| ViewError::failure(format!("{}: cannot write the report: {e}", report_path.display())))?;
-        if let Renderer::Cpu(r) = &mut state.renderer {
-            r.recycle(frame);
-        }
-        eprintln!("screenshot: {} ({w}x{h}), report {}", path.display(), report_path.display());
+        self.say(format!("screenshot: {} ({w}x{h}), report {}", path.display(), report_path.display()));
         Ok(())
     }
 
@@ -382,10 +700,8 @@ impl<'s> App<'s> {
                     self.key(event_loop, &k, true);
                     self.key(event_loop, &k, false);
                 }
-                Event::MouseDrag(dx, dy) => {
-                    self.fly.look(dx, dy);
-                    self.dirty = true;
-                }
+                Event::MouseMove(x, y) => self.cursor = Some((x as f64, y as f64)),
+                Event::MouseDrag(dx, dy) => self.drag(dx, dy),
                 Event::Scroll(n) => self.fly.scroll(n),
                 Event::Wait(n) => {
                     if n > 0 {
@@ -394,16 +710,12 @@ impl<'s> App<'s> {
                     }
                 }
                 Event::Resize(w, h) => {
-                    if let Some(s) = &self.state {
-                        let _ = s.window.request_inner_size(PhysicalSize::new(w, h));
+                    if let Some(g) = &self.gfx {
+                        let _ = g.window.request_inner_size(PhysicalSize::new(w, h));
                     }
                 }
-                Event::Screenshot(path) => {
-                    if let Err(e) = self.screenshot(&path) {
-                        self.fail(event_loop, e);
-                        return false;
-                    }
-                }
+                Event::Screenshot(path) => self.apply(event_loop, Action::Screenshot(Some(path))),
+                Event::Do(action) => self.apply(event_loop, action),
                 Event::PrintCamera => {
                     let c = &self.fly.camera;
                     println!(
@@ -412,16 +724,32 @@ impl<'s> App<'s> {
                     );
                 }
                 Event::PrintFrame => {
-                    let s = self.state.as_ref().map_or("none".to_string(), |s| s.backend_name.clone());
+                    let s = self.gfx.as_ref().map_or("none".to_string(), |g| g.backend_name.clone());
                     println!(
-                        "frame: backend {s} scale {:.3} frames {} mean frame {:.2} ms last frame {:.2} ms at {}x{}",
+                        "frame: backend {s} scale {:.3} frames {} rendered {} mean frame {:.2} ms last frame {:.2} ms at {}x{}",
                         self.scale,
                         self.frames,
-                        self.frame_ms_sum / self.frames.max(1) as f64,
+                        self.rendered,
+                        self.frame_ms_sum / self.rendered.max(1) as f64,
                         self.last_ms,
                         self.last_size.0,
                         self.last_size.1
                     );
+                }
+                Event::PrintSelection => {
+                    let h = self.last_report.as_ref().and_then(|r| r.heuristic.as_ref());
+                    match h {
+                        Some(h) => {
+                            let ids: Vec<String> = h.objects.iter().filter(|o| o.selected).map(|o| o.id.to_string()).collect();
+                            println!(
+                                "selection: budget {} spent {} selected [{}]",
+                                h.budget.map_or("unlimited".to_string(), |b| b.to_string()),
+                                h.spent,
+                                ids.join(",")
+                            );
+                        }
+                        None => println!("selection: none"),
+                    }
                 }
                 Event::PrintMemory => {
                     println!("memory: VmRSS {} kB frame {}", script::resident_kb().unwrap_or(0), self.frames);
@@ -430,6 +758,9 @@ impl<'s> App<'s> {
                     self.quit(event_loop);
                     return false;
                 }
+            }
+            if self.error.is_some() {
+                return false;
             }
         }
         if self.script.as_ref().is_some_and(|s| s.len() == 0) {
@@ -440,13 +771,28 @@ impl<'s> App<'s> {
     }
 
     fn quit(&mut self, event_loop: &ActiveEventLoop) {
-        if self.frames > 0 {
-            println!("frames: {} mean frame {:.2} ms", self.frames, self.frame_ms_sum / self.frames as f64);
+        if self.rendered > 0 {
+            println!("frames: {} rendered {} mean frame {:.2} ms", self.frames, self.rendered, self.frame_ms_sum / self.rendered as f64);
         }
         event_loop.exit();
     }
 
-    /// One frame: input → camera → render → present.
+    /// Moves the camera along the path being played.
+    fn play(&mut self, dt: f32) {
+        let Some(t) = self.playing else { return };
+        let Some(path) = self.path_to_play() else {
+            self.playing = None;
+            return;
+        };
+        let (position, target) = path.sample(t);
+        self.fly.camera.position = position;
+        self.fly.camera.target = target;
+        self.dirty = true;
+        let end = path.keyframes.last().map_or(t, |k| k.time);
+        self.playing = (t < end).then_some(t + dt);
+    }
+
+    /// One frame: input → camera → render → present (frame, then overlay).
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
         let scripted = self.script.is_some();
         let now = Instant::now();
@@ -455,71 +801,90 @@ impl<'s> App<'s> {
         if scripted && !self.run_script(event_loop) {
             return;
         }
+        self.play(dt);
         if self.fly.step(dt) {
             self.dirty = true;
         }
-        let Some(state) = self.state.as_mut() else { return };
-        let (w, h) = (state.config.width, state.config.height);
-        if w == 0 || h == 0 || state.window.is_minimized() == Some(true) {
+        let Some(g) = self.gfx.as_mut() else { return };
+        let Some(open) = self.open.as_mut() else { return };
+        let (w, h) = (g.config.width, g.config.height);
+        if w == 0 || h == 0 || g.window.is_minimized() == Some(true) {
             return;
         }
-        let moving = self.fly.moving() || self.looking;
-        let render_start = Instant::now();
-        let src_view: wgpu::TextureView = match &mut state.renderer {
-            Renderer::Gpu(r) => {
-                let settings = FrameSettings { width: w, height: h, mode: self.options.mode };
-                if let Err(e) = r.render_to_targets(&self.fly.camera, settings, &mut |_| {}) {
-                    self.error.get_or_insert(ViewError::failure(format!("GPU frame failed: {e}")));
+        let moving = self.fly.moving() || self.looking || self.playing.is_some();
+        let frame_start = Instant::now();
+        let is_cpu = g.gpu.is_none();
+        let need = !is_cpu || self.dirty || self.coarse || g.upload.is_none();
+        let request = FrameRequest {
+            camera: self.fly.camera,
+            mode: self.mode,
+            buffer: self.buffer,
+            highlight: self.highlight,
+            size: if is_cpu && moving { scaled((w, h), self.scale) } else { (w, h) },
+        };
+        let shown = if need {
+            match open.with_dependent_mut(|_, r| render_frame(r, g, &request)) {
+                Ok(s) => {
+                    self.last_size = request.size;
+                    self.coarse = request.size != (w, h);
+                    self.dirty = false;
+                    Some(s)
+                }
+                Err(e) => {
+                    self.error.get_or_insert(ViewError::failure(format!("frame failed: {e}")));
                     event_loop.exit();
                     return;
                 }
-                self.dirty = false;
-                self.last_size = (w, h);
-                match r.targets() {
-                    Some(t) => t.final_image.view.clone(),
-                    None => return,
-                }
             }
-            Renderer::Cpu(r) => {
-                let need = self.dirty || self.coarse || state.upload.is_none();
-                if need {
-                    // Moving: a reduced size that holds the target frame time; still: full size.
-                    let s = if moving { self.scale } else { 1.0 };
-                    let (fw, fh) = (((w as f32 * s).round() as u32).max(1), ((h as f32 * s).round() as u32).max(1));
-                    let settings = FrameSettings { width: fw, height: fh, mode: self.options.mode };
-                    let t0 = Instant::now();
-                    let frame = r.render(&self.fly.camera, settings, &mut |_| {});
-                    let ms = t0.elapsed().as_secs_f64() * 1e3;
-                    if moving {
-                        let ratio = (self.options.target_ms / ms.max(0.1)).sqrt().clamp(0.5, 2.0) as f32;
-                        self.scale = (self.scale * ratio).clamp(MIN_SCALE, 1.0);
-                    }
-                    if state.upload.as_ref().is_none_or(|u| u.size != (fw, fh)) {
-                        state.upload = Some(Upload::new(&state.device, (fw, fh)));
-                    }
-                    if let Some(u) = &state.upload {
-                        u.write(&state.queue, frame.buffers.final_srgb.as_flattened());
-                    }
-                    r.recycle(frame);
-                    self.last_size = (fw, fh);
-                    self.coarse = s < 1.0;
-                    self.dirty = false;
-                }
-                match &state.upload {
-                    Some(u) => u.view.clone(),
-                    None => return,
-                }
-            }
+        } else {
+            None
         };
-        let surface_texture = match state.surface.get_current_texture() {
+        let (src, ids, report) = match shown {
+            Some(Shown { src, ids, report }) => (src, ids, Some(report)),
+            // The CPU frame did not change: show the uploaded one again (overlay updates).
+            None => match &g.upload {
+                Some(u) => (u.view.clone(), self.highlight.and(g.ids_upload.as_ref().map(|u| u.view.clone())), None),
+                None => return,
+            },
+        };
+        let fps = if self.last_ms > 0.0 { 1000.0 / self.last_ms } else { 0.0 };
+        let lights: Vec<(String, bool)> = self.info.light_names.iter().cloned().zip(self.info.lights_on.iter().copied()).collect();
+        if let Some(r) = report {
+            self.last_report = Some(r);
+        }
+        let model = OverlayModel {
+            backend: &g.backend_name,
+            mode: self.mode,
+            frame_size: self.last_size,
+            fps,
+            history: &self.history,
+            gpu_stage_times: self.last_report.as_ref().is_some_and(|r| r.gpu_timings_ms.is_some()),
+            report: self.last_report.as_ref(),
+            budget: self.heuristic.budget,
+            policy: self.heuristic.policy,
+            importance: self.heuristic.importance,
+            buffer: self.buffer,
+            has_point_clouds: self.info.has_point_clouds,
+            highlight: self.highlight,
+            clip_capsule: self.knobs.clip_capsule,
+            sphere_effects: self.knobs.sphere_effects,
+            primary_visibility: is_cpu.then_some(self.knobs.primary_visibility),
+            lights: &lights,
+            keyframes: self.recorder.keyframes.len(),
+            playing: self.playing.is_some(),
+            orbit: self.orbit.is_some(),
+            message: self.message.as_deref(),
+        };
+        let actions = g.overlay.build(&g.window, &model);
+        let surface_texture = match g.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                state.surface.configure(&state.device, &state.config);
-                state.window.request_redraw();
+                g.surface.configure(&g.device, &g.config);
+                g.window.request_redraw();
                 return;
             }
             wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => {
-                state.window.request_redraw();
+                g.window.request_redraw();
                 return;
             }
             other => {
@@ -529,22 +894,122 @@ impl<'s> App<'s> {
             }
         };
         let target = surface_texture.texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let mut enc = state.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("view.present") });
-        state.blit.encode(&state.device, &mut enc, &src_view, &target, (w, h));
-        state.queue.submit([enc.finish()]);
-        state.queue.present(surface_texture);
+        let mut enc = g.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("view.present") });
+        let highlight = match (self.highlight, &ids) {
+            (Some(id), Some(view)) => Some((view, id)),
+            _ => None,
+        };
+        g.blit.encode(&g.device, &g.queue, &mut enc, &src, highlight, (&target, (w, h)));
+        g.overlay.paint(&g.device, &g.queue, &mut enc, &target, (w, h));
+        g.queue.submit([enc.finish()]);
+        g.queue.present(surface_texture);
+        // Lets wgpu run its callbacks (device lost) and free what finished frames used.
+        let _ = g.device.poll(wgpu::PollType::Poll);
+        let device_error = g.device_error.lock().ok().and_then(|mut e| e.take());
+        if let Some(e) = device_error {
+            self.fail(event_loop, ViewError::failure(format!("the graphics device failed: {e}")));
+            return;
+        }
+        let frame_ms = frame_start.elapsed().as_secs_f64() * 1e3;
         self.frames += 1;
-        self.last_ms = render_start.elapsed().as_secs_f64() * 1e3;
-        self.frame_ms_sum += self.last_ms;
-        let cpu_refining = matches!(state.renderer, Renderer::Cpu(_)) && (self.coarse || self.dirty);
-        if scripted || moving || cpu_refining {
-            state.window.request_redraw();
+        if need {
+            self.rendered += 1;
+            self.last_ms = frame_ms;
+            self.frame_ms_sum += frame_ms;
+            if let Some(r) = &self.last_report {
+                if self.history.len() == HISTORY_FRAMES {
+                    self.history.pop_front();
+                }
+                self.history.push_back(Sample { frame_ms, stages: r.gpu_timings_ms.unwrap_or(r.timings_ms) });
+            }
+            // CPU backend, moving: scale the next frame's pixel count by how far this whole frame
+            // (render, upload, overlay, present) was from the target time.
+            if is_cpu && moving {
+                let ratio = (self.options.target_ms / frame_ms.max(0.1)).sqrt().clamp(0.5, 2.0) as f32;
+                self.scale = (self.scale * ratio).clamp(MIN_SCALE, 1.0);
+            }
+        }
+        let cpu_refining = is_cpu && (self.coarse || self.dirty);
+        let acted = !actions.is_empty();
+        for a in actions {
+            self.apply(event_loop, a);
+        }
+        if let Some(g) = &self.gfx
+            && (scripted || moving || cpu_refining || acted)
+        {
+            g.window.request_redraw();
         }
     }
 }
 
-fn key_name(code: KeyCode) -> Option<&'static str> {
+/// What one frame shows.
+struct FrameRequest {
+    camera: Camera,
+    mode: Mode,
+    buffer: BufferKind,
+    highlight: Option<u32>,
+    /// Rendered size (the window's, or less on the CPU backend while moving).
+    size: (u32, u32),
+}
+
+/// A rendered frame, ready to draw: its image and object ids on the GPU, and its report.
+struct Shown {
+    src: wgpu::TextureView,
+    ids: Option<wgpu::TextureView>,
+    report: FrameReport,
+}
+
+fn scaled((w, h): (u32, u32), s: f32) -> (u32, u32) {
+    (((w as f32 * s).round() as u32).max(1), ((h as f32 * s).round() as u32).max(1))
+}
+
+/// Renders `req` with `r`. The GPU backend's final image stays on the GPU (no read-back); any
+/// other buffer, and every CPU frame, is made an image on the host and uploaded.
+fn render_frame(r: &mut Renderer, g: &mut Gfx, req: &FrameRequest) -> Result<Shown, String> {
+    let settings = FrameSettings { width: req.size.0, height: req.size.1, mode: req.mode };
+    if req.buffer == BufferKind::Final
+        && let Renderer::Gpu(gpu) = r
+    {
+        let report = gpu.render_to_targets(&req.camera, settings, &mut |_| {}).map_err(|e| e.to_string())?;
+        let t = gpu.targets().ok_or("the GPU frame has no targets")?;
+        let ids = req.highlight.map(|_| t.object_id.view.clone());
+        return Ok(Shown { src: t.final_image.view.clone(), ids, report });
+    }
+    let frame = r.render(&req.camera, settings)?;
+    let view = FrameView { gbuffer: &frame.gbuffer, buffers: &frame.buffers, rt_packed: frame.rt_packed.as_ref() };
+    let image = buffer_view::view(req.buffer, &view).or_else(|| buffer_view::view(BufferKind::Final, &view)).ok_or("no final image")?;
+    let src = Upload::refresh(
+        &mut g.upload,
+        &g.device,
+        &g.queue,
+        (image.width, image.height),
+        wgpu::TextureFormat::Rgba8Unorm,
+        image.pixels.as_flattened(),
+    )
+    .view
+    .clone();
+    let ids = match req.highlight {
+        Some(_) => {
+            let bytes: Vec<u8> =
+                frame.gbuffer.object_id.iter().flat_map(|&id| if id == RT_SCENE_OBJECT { NO_OBJECT } else { id }.to_le_bytes()).collect();
+            let size = (frame.gbuffer.width, frame.gbuffer.height);
+            Some(Upload::refresh(&mut g.ids_upload, &g.device, &g.queue, size, wgpu::TextureFormat::R32Uint, &bytes).view.clone())
+        }
+        None => None,
+    };
+    let report = frame.report.clone();
+    r.recycle(frame);
+    Ok(Shown { src, ids, report })
+}
+
+/// `hybrid-screenshot-N.png` in the current folder, the first N not taken.
+fn next_screenshot_path() -> PathBuf {
+    (1..).map(|n| PathBuf::from(format!("hybrid-screenshot-{n}.png"))).find(|p| !p.exists()).expect("some screenshot number is free")
+}
+
+fn key_name(code: KeyCode, ctrl: bool) -> Option<&'static str> {
     Some(match code {
+        KeyCode::KeyS if ctrl => "ctrl+s",
         KeyCode::KeyW => "w",
         KeyCode::KeyA => "a",
         KeyCode::KeyS => "s",
@@ -553,6 +1018,9 @@ fn key_name(code: KeyCode) -> Option<&'static str> {
         KeyCode::KeyE => "e",
         KeyCode::KeyR => "r",
         KeyCode::KeyF => "f",
+        KeyCode::KeyO => "o",
+        KeyCode::KeyP => "p",
+        KeyCode::KeyK => "k",
         KeyCode::ShiftLeft | KeyCode::ShiftRight => "shift",
         KeyCode::Tab => "tab",
         KeyCode::F12 => "f12",
@@ -560,60 +1028,76 @@ fn key_name(code: KeyCode) -> Option<&'static str> {
     })
 }
 
-impl ApplicationHandler for App<'_> {
+impl ApplicationHandler for App {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
-        if self.state.is_some() {
+        if self.gfx.is_some() {
             return;
         }
-        match self.create_state(event_loop) {
-            Ok(s) => {
-                s.window.request_redraw();
-                self.state = Some(s);
+        match self.create_gfx(event_loop) {
+            Ok(g) => {
+                g.window.request_redraw();
+                self.gfx = Some(g);
             }
-            Err(e) => self.fail(event_loop, e),
+            Err(e) => return self.fail(event_loop, e),
+        }
+        if let Some(scene) = self.first_scene.take() {
+            let file = self.info.path.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
+            if let Err(e) = self.install(scene) {
+                self.fail(event_loop, ViewError::bad_input(format!("{file}: {e}")));
+            }
         }
     }
 
     fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        if let Some(g) = self.gfx.as_mut()
+            && !matches!(event, WindowEvent::RedrawRequested)
+        {
+            let consumed = g.overlay.on_window_event(&g.window, &event);
+            g.window.request_redraw();
+            // Keys typed into a slider, clicks on a panel: the overlay's, not the camera's. Key
+            // releases always reach the camera, so no key stays held.
+            let release = matches!(&event, WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Released);
+            if consumed && !release {
+                return;
+            }
+        }
         match event {
             WindowEvent::CloseRequested => self.quit(event_loop),
             WindowEvent::Resized(size) => {
-                if let Some(s) = self.state.as_mut() {
-                    s.config.width = size.width;
-                    s.config.height = size.height;
+                if let Some(g) = self.gfx.as_mut() {
+                    g.config.width = size.width;
+                    g.config.height = size.height;
                     if size.width > 0 && size.height > 0 {
-                        s.surface.configure(&s.device, &s.config);
+                        g.surface.configure(&g.device, &g.config);
                         self.dirty = true;
-                        s.window.request_redraw();
                     }
                 }
             }
+            WindowEvent::ModifiersChanged(m) => self.modifiers = m.state(),
             WindowEvent::KeyboardInput { event, .. } => {
                 if event.repeat {
                     return;
                 }
                 if let PhysicalKey::Code(code) = event.physical_key
-                    && let Some(name) = key_name(code)
+                    && let Some(name) = key_name(code, self.modifiers.control_key())
                 {
                     self.key(event_loop, name, event.state == ElementState::Pressed);
-                    if let Some(s) = &self.state {
-                        s.window.request_redraw();
-                    }
                 }
             }
+            WindowEvent::DroppedFile(path) => self.apply(event_loop, Action::Open(path)),
             WindowEvent::MouseInput { state, button: MouseButton::Right, .. } => {
-                self.looking = state == ElementState::Pressed;
-                self.last_cursor = None;
+                let over_overlay = self.gfx.as_ref().is_some_and(|g| g.overlay.wants_pointer());
+                self.looking = state == ElementState::Pressed && !over_overlay;
+                self.last_drag = None;
             }
-            WindowEvent::CursorMoved { position, .. } if self.looking => {
-                if let Some((x, y)) = self.last_cursor {
-                    self.fly.look((position.x - x) as f32, (position.y - y) as f32);
-                    self.dirty = true;
-                    if let Some(s) = &self.state {
-                        s.window.request_redraw();
+            WindowEvent::CursorMoved { position, .. } => {
+                self.cursor = Some((position.x, position.y));
+                if self.looking {
+                    if let Some((x, y)) = self.last_drag {
+                        self.drag((position.x - x) as f32, (position.y - y) as f32);
                     }
+                    self.last_drag = Some((position.x, position.y));
                 }
-                self.last_cursor = Some((position.x, position.y));
             }
             WindowEvent::MouseWheel { delta, .. } => {
                 let notches = match delta {
