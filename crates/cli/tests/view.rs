@@ -269,14 +269,15 @@ fn keys_record_and_save_a_path_play_it_frame_and_orbit() {
 }
 
 /// A file that fails to open leaves the open scene (error on stderr and in the overlay); a good
-/// one replaces it (as dropping it on the window does). A light switched off leaves the frame.
+/// one replaces it (as dropping it on the window does). A light switched off leaves the frame;
+/// an object's K and E set live reach the heuristic.
 #[test]
 fn open_keeps_the_scene_on_a_bad_file_and_lights_switch_off() {
     let dir = tempfile::tempdir().unwrap();
     let scene = scenes().join("demo.toml");
     std::fs::write(dir.path().join("broken.obj"), "v 0 0 0\nv 1 0 0\nf 1 2 7\n").unwrap();
     std::fs::write(dir.path().join("tet.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n").unwrap();
-    let script = "wait 1\nset light 1 off\nwait 1\nscreenshot dark.png\nopen broken.obj\nwait 1\nscreenshot still.png\n\
+    let script = "wait 1\nset light 1 off\nweights 4 2 0.5\nwait 1\nscreenshot dark.png\nopen broken.obj\nwait 1\nscreenshot still.png\n\
                   open tet.obj\nwait 2\nscreenshot tet.png\nquit\n";
     let out = view(dir.path(), &[scene.to_str().unwrap(), "--backend", "cpu", "--size", "96x64"], script);
     let err = String::from_utf8_lossy(&out.stderr);
@@ -285,6 +286,10 @@ fn open_keeps_the_scene_on_a_bad_file_and_lights_switch_off() {
     let report = |name: &str| -> serde_json::Value { serde_json::from_slice(&std::fs::read(dir.path().join(name)).unwrap()).unwrap() };
     let demo_objects = report("dark.json")["objects"].clone();
     assert_eq!(report("dark.json")["heuristic"]["lights"], 2, "the demo's 3 lights, one off");
+    // K and E set in the object table (`weights N K E`) are the heuristic's.
+    let dark = report("dark.json");
+    let glass = dark["heuristic"]["objects"].as_array().unwrap().iter().find(|o| o["id"] == 4).expect("object 4 visible").clone();
+    assert_eq!((glass["K"].as_f64(), glass["E"].as_f64()), (Some(2.0), Some(0.5)), "{glass}");
     assert_eq!(report("still.json")["objects"], demo_objects, "the demo stays open after the bad file");
     // The tetrahedron's default scene: the model and a ground plane, one sun.
     let tet = report("tet.json");

@@ -117,11 +117,22 @@ impl MaskChoice {
 #[derive(Debug, Clone)]
 pub struct HeuristicStage {
     heuristic: Heuristic,
+    /// Per object: K and E set live (the viewer's object table), in place of the scene file's.
+    weights: Vec<Option<(f32, f32)>>,
 }
 
 impl HeuristicStage {
     pub fn new(heuristic: Heuristic) -> Self {
-        Self { heuristic }
+        Self { heuristic, weights: Vec::new() }
+    }
+
+    /// Object `id`'s K (static relevance) and E (estimated cost) from now on, in place of the
+    /// scene file's; `None` goes back to the file's.
+    pub fn set_object_weights(&mut self, id: usize, weights: Option<(f32, f32)>) {
+        if self.weights.len() <= id {
+            self.weights.resize(id + 1, None);
+        }
+        self.weights[id] = weights;
     }
 
     /// The heuristic, e.g. to change its settings between frames.
@@ -149,7 +160,12 @@ impl HeuristicStage {
             Mode::RtOnly => MaskChoice::AllCovered,
             Mode::Hybrid | Mode::All => {
                 let areas = count_areas()?;
-                let objects = object_inputs(prepared.scene, &prepared.object_bounds, &areas);
+                let mut objects = object_inputs(prepared.scene, &prepared.object_bounds, &areas);
+                for (o, w) in objects.iter_mut().zip(&self.weights) {
+                    if let Some((k, e)) = *w {
+                        (o.relevance, o.cost) = (k, e);
+                    }
+                }
                 let frame = frame_input(prepared.scene, camera, width, height);
                 MaskChoice::Objects(if mode == Mode::All {
                     self.heuristic.run_unlimited(&objects, &frame)
@@ -232,5 +248,29 @@ mod tests {
         assert!(report.as_ref().is_some_and(|r| r.spent > 0.0), "the first ms-budget frame traces something to measure");
         stage.record_trace(Mode::Hybrid, report.as_ref(), 5.0);
         assert!(stage.heuristic().ms_per_cost().is_some_and(|m| m > 0.0));
+    }
+
+    #[test]
+    fn object_weights_set_live_replace_the_files_k_and_e() {
+        let scene = demo_scene();
+        let prepared = PreparedScene::new(&scene);
+        let areas = vec![100u64; scene.objects.len()];
+        let mut stage = stage_for(Budget::Unlimited);
+        let run = |stage: &mut HeuristicStage| {
+            stage.choose(&prepared, &scene.camera, (64, 36), Mode::Hybrid, || Ok::<_, ()>(areas.clone())).unwrap().into_report().unwrap()
+        };
+        let before = run(&mut stage);
+        stage.set_object_weights(2, Some((3.0, 0.5)));
+        let after = run(&mut stage);
+        let (b, a) = (&before.objects[2], &after.objects[2]);
+        assert_eq!((a.k, a.e), (3.0, 0.5));
+        // C = A·Q·E: halved with E from 1 to 0.5 (the demo's objects have the default E = 1).
+        assert_eq!(b.e, 1.0);
+        assert_eq!(a.c, b.c * 0.5);
+        // The other objects keep the file's weights; `None` restores the file's.
+        let (b1, a1) = (&before.objects[1], &after.objects[1]);
+        assert_eq!((a1.k, a1.e, a1.c), (b1.k, b1.e, b1.c));
+        stage.set_object_weights(2, None);
+        assert_eq!((run(&mut stage).objects[2].k, run(&mut stage).objects[2].e), (b.k, b.e));
     }
 }

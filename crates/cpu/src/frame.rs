@@ -88,6 +88,12 @@ impl<'s> CpuRenderer<'s> {
         self.heuristic.heuristic_mut()
     }
 
+    /// The heuristic stage, e.g. to set an object's K and E live
+    /// ([`HeuristicStage::set_object_weights`]).
+    pub fn heuristic_stage_mut(&mut self) -> &mut HeuristicStage {
+        &mut self.heuristic
+    }
+
     /// Hands a finished frame back so the next frame reuses its memory (G-buffer, lighting,
     /// trace outputs, final image, packed RT frame) instead of allocating and page-faulting it
     /// anew (for loops that render many frames; optional).

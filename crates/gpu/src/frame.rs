@@ -122,6 +122,12 @@ impl<'s> GpuRenderer<'s> {
         self.heuristic.heuristic_mut()
     }
 
+    /// The heuristic stage, e.g. to set an object's K and E live
+    /// ([`HeuristicStage::set_object_weights`]).
+    pub fn heuristic_stage_mut(&mut self) -> &mut HeuristicStage {
+        &mut self.heuristic
+    }
+
     /// Renders one frame and reads every buffer back (for the image, dumps and tests).
     /// `on_stage` is told each stage's name as it is recorded.
     pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(Stage)) -> Result<Frame, GpuError> {

@@ -18,6 +18,8 @@ pub enum Action {
     SetPolicy(Policy),
     /// The heuristic's I.
     SetImportance(f32),
+    /// Object `id`'s K (static relevance) and E (estimated cost), in place of the scene file's.
+    SetObjectWeights(usize, f32, f32),
     /// Tint and outline the object with this id (index in the scene's object list).
     Highlight(Option<u32>),
     SetClipCapsule(bool),

@@ -199,6 +199,8 @@ struct App {
     mode: Mode,
     buffer: BufferKind,
     highlight: Option<u32>,
+    /// Per object: K and E set in the object table (`None`: the scene file's).
+    weights: Vec<Option<(f32, f32)>>,
     /// `O`: the point the camera orbits.
     orbit: Option<Vec3>,
     /// `P`: the time on the camera path being played.
@@ -264,6 +266,7 @@ impl App {
             mode: options.mode,
             buffer: BufferKind::Final,
             highlight: None,
+            weights: vec![None; scene.objects.len()],
             orbit: None,
             playing: None,
             recorder: PathRecorder::default(),
@@ -425,11 +428,9 @@ impl App {
     /// On failure the scene that was open stays open.
     fn install(&mut self, scene: Scene) -> Result<(), String> {
         let gpu = self.gfx.as_ref().and_then(|g| g.gpu.as_ref());
-        let mut open = OpenScene::open(scene, gpu, self.knobs)?;
-        let settings = self.heuristic.clone();
-        open.with_dependent_mut(|_, r| r.heuristic_mut().set_settings(settings));
+        let open = OpenScene::open(scene, gpu, self.knobs)?;
         self.open = Some(open);
-        self.dirty = true;
+        self.reapply();
         Ok(())
     }
 
@@ -449,9 +450,11 @@ impl App {
             heuristic.policy = p;
         }
         let old = std::mem::replace(&mut self.heuristic, heuristic);
+        let old_weights = std::mem::replace(&mut self.weights, vec![None; scene.objects.len()]);
         let camera = scene.camera;
         if let Err(e) = self.install(scene) {
             self.heuristic = old;
+            self.weights = old_weights;
             return self.say(format!("cannot open {}: {e}", path.display()));
         }
         self.info = info;
@@ -468,6 +471,23 @@ impl App {
         self.say(format!("opened {}", path.display()));
     }
 
+    /// The live settings (heuristic, per-object K and E) on a newly built renderer.
+    fn reapply(&mut self) {
+        let settings = self.heuristic.clone();
+        let weights = self.weights.clone();
+        if let Some(open) = self.open.as_mut() {
+            open.with_dependent_mut(|_, r| {
+                r.heuristic_mut().set_settings(settings);
+                for (id, w) in weights.into_iter().enumerate() {
+                    if w.is_some() {
+                        r.set_object_weights(id, w);
+                    }
+                }
+            });
+        }
+        self.dirty = true;
+    }
+
     /// The open scene rebuilt with the lights that are on.
     fn relight(&mut self) -> Result<(), String> {
         let Some(open) = self.open.take() else { return Ok(()) };
@@ -475,11 +495,9 @@ impl App {
         scene.lights = lights_switched(&self.info.all_lights, &self.info.lights_on);
         let gpu = self.gfx.as_ref().and_then(|g| g.gpu.as_ref());
         match OpenScene::open(scene, gpu, self.knobs) {
-            Ok(mut open) => {
-                let settings = self.heuristic.clone();
-                open.with_dependent_mut(|_, r| r.heuristic_mut().set_settings(settings));
+            Ok(open) => {
                 self.open = Some(open);
-                self.dirty = true;
+                self.reapply();
                 Ok(())
             }
             Err(e) => Err(e),
@@ -496,6 +514,16 @@ impl App {
             Action::SetPolicy(p) => self.set_heuristic(|h| h.policy = p),
             Action::SetImportance(i) => self.set_heuristic(|h| h.importance = i.max(0.0)),
             Action::Highlight(id) => self.highlight = id,
+            Action::SetObjectWeights(id, k, e) => {
+                if id >= self.weights.len() {
+                    return self.say(format!("object {id} does not exist: the scene has {} objects", self.weights.len()));
+                }
+                self.weights[id] = Some((k.max(0.0), e.max(0.0)));
+                let w = self.weights[id];
+                if let Some(open) = self.open.as_mut() {
+                    open.with_dependent_mut(|_, r| r.set_object_weights(id, w));
+                }
+            }
             Action::SetClipCapsule(v) => self.set_knobs(|k| k.clip_capsule = v),
             Action::SetSphereEffects(v) => self.set_knobs(|k| k.sphere_effects = v),
             Action::SetPrimaryVisibility(v) => self.set_knobs(|k| k.primary_visibility = v),

@@ -75,6 +75,14 @@ impl Renderer<'_> {
         }
     }
 
+    /// Object `id`'s K and E in place of the scene file's (`None`: the file's).
+    pub fn set_object_weights(&mut self, id: usize, weights: Option<(f32, f32)>) {
+        match self {
+            Renderer::Cpu(r) => r.heuristic_stage_mut().set_object_weights(id, weights),
+            Renderer::Gpu(r) => r.heuristic_stage_mut().set_object_weights(id, weights),
+        }
+    }
+
     /// One frame with every buffer on the host (the CPU frame; the GPU frame read back).
     pub fn render(&mut self, camera: &Camera, settings: FrameSettings) -> Result<Frame, String> {
         match self {

@@ -355,8 +355,16 @@ fn objects(ui: &mut egui::Ui, m: &OverlayModel, actions: &mut Vec<Action>) {
                 ui.label(o.q.to_string());
                 ui.label(format!("{:.1}", o.c));
                 ui.label(format!("{:.3}", o.r));
-                ui.label(format!("{:.2}", o.k));
-                ui.label(format!("{:.2}", o.e));
+                let (mut k, mut e) = (o.k, o.e);
+                let dk = ui
+                    .add(egui::DragValue::new(&mut k).range(0.0..=100.0).speed(0.05))
+                    .on_hover_text("K: static relevance (higher: chosen sooner)");
+                let de = ui
+                    .add(egui::DragValue::new(&mut e).range(0.0..=100.0).speed(0.05))
+                    .on_hover_text("E: estimated cost per pixel and ray (higher: chosen later)");
+                if dk.changed() || de.changed() {
+                    actions.push(Action::SetObjectWeights(o.id, k, e));
+                }
                 ui.label(if o.s { "✔" } else { "" });
                 ui.label(if o.selected { "✔" } else { "" });
                 ui.label(match (o.reflective, o.refractive) {

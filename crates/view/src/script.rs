@@ -16,6 +16,7 @@
 //! set budget 250      #   budget unlimited|COST|MSms, policy paper|knapsack, importance I,
 //! set buffer mask     #   buffer NAME (a --dump name), clip on|off, sphere-effects on|off,
 //!                     #   primary-visibility auto|projected|bvh, light N on|off (N from 1)
+//! weights N K E       # object N's K (static relevance) and E (estimated cost), as in the table
 //! highlight N         # tint object N (index in the scene's object list), or `highlight none`
 //! open PATH           # open a scene or model, as dropping it on the window does
 //! print-selection     # prints `selection: budget B spent S selected [ids]` of the last frame
@@ -136,6 +137,14 @@ pub fn parse(path: &Path, text: &str) -> Result<Vec<Event>, String> {
             "print-selection" => {
                 want(0)?;
                 Event::PrintSelection
+            }
+            "weights" => {
+                want(3)?;
+                let (k, e) = (num(args[1])?, num(args[2])?);
+                if k < 0.0 || e < 0.0 {
+                    return Err(err("K and E must be ≥ 0"));
+                }
+                Event::Do(Action::SetObjectWeights(count(args[0])? as usize, k, e))
             }
             "highlight" => {
                 want(1)?;
