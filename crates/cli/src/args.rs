@@ -253,6 +253,16 @@ pub enum CapsuleVisibilityChoice {
 }
 
 impl CapsuleVisibilityChoice {
+    /// The CPU capsule's setting.
+    pub fn primary_visibility(self) -> hybrid_cpu::capsule::PrimaryVisibility {
+        use hybrid_cpu::capsule::PrimaryVisibility;
+        match self {
+            Self::Auto => PrimaryVisibility::Auto,
+            Self::Projected => PrimaryVisibility::Projected,
+            Self::Bvh => PrimaryVisibility::Bvh,
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Self::Auto => "auto",

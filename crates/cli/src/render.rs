@@ -4,7 +4,6 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use hybrid_core::{Frame, FrameSettings, Mode, Stage};
-use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
 use hybrid_gpu::{AdapterChoice, GpuContext, GpuError};
@@ -147,11 +146,7 @@ impl<'s> AnyRenderer<'s> {
                 let mut r = CpuRenderer::new(scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
-                r.set_capsule_visibility(match options.capsule_visibility {
-                    CapsuleVisibilityChoice::Auto => PrimaryVisibility::Auto,
-                    CapsuleVisibilityChoice::Projected => PrimaryVisibility::Projected,
-                    CapsuleVisibilityChoice::Bvh => PrimaryVisibility::Bvh,
-                });
+                r.set_capsule_visibility(options.capsule_visibility.primary_visibility());
                 AnyRenderer::Cpu(Box::new(r))
             }
             Backend::Gpu(ctx) => {

@@ -296,3 +296,54 @@ fn open_keeps_the_scene_on_a_bad_file_and_lights_switch_off() {
     assert_eq!(tet["objects"], 2, "{tet}");
     assert_eq!(tet["heuristic"]["lights"], 1, "{tet}");
 }
+
+/// The overlay driven as a person drives it: real mouse clicks (xdotool, inside the same virtual
+/// display) on the budget's "cost" button and then the middle of its slider change the selected
+/// set, and the set the viewer prints is the heuristic report's. The click positions are where
+/// egui lays those widgets out (the slider is pressed and released half a second apart: egui
+/// moves a slider while the button is down) in a 640×480 window (the panel's rows above them are one line
+/// each, so they do not move with the numbers); if the layout changes, this test fails and the
+/// positions must be measured again (an `xwd -root` capture shows them).
+#[test]
+fn clicking_the_overlay_budget_changes_the_selection() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    std::fs::write(dir.path().join("script.txt"), "wait-ms 9000\nprint-selection\nscreenshot clicked.png\nquit\n").unwrap();
+    let runtime = dir.path().join("xdg");
+    std::fs::create_dir_all(&runtime).unwrap();
+    let driver = format!(
+        "command -v xdotool >/dev/null || {{ echo 'xdotool is not installed (apt-get install xdotool)' >&2; exit 3; }}\n\
+         '{bin}' view '{scene}' --backend cpu --size 640x480 --script script.txt &\n\
+         pid=$!\n\
+         xdotool search --sync --name 'hybrid view' >/dev/null\n\
+         sleep 3\n\
+         xdotool mousemove 174 276 click 1\n\
+         sleep 1.5\n\
+         xdotool mousemove 88 299\n\
+         sleep 0.5\n\
+         xdotool mousedown 1\n\
+         sleep 0.5\n\
+         xdotool mouseup 1\n\
+         wait $pid\n",
+        bin = env!("CARGO_BIN_EXE_hybrid"),
+        scene = scene.display()
+    );
+    let out = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x1024x24", "sh", "-c", &driver])
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .current_dir(dir.path())
+        .output()
+        .expect("xvfb-run must be installed (apt-get install xvfb xauth) to run the viewer tests");
+    assert!(out.status.success(), "{}\nstdout: {}\nstderr: {}", out.status, stdout(&out), String::from_utf8_lossy(&out.stderr));
+    let sel = selections(&out);
+    assert_eq!(sel.len(), 1, "{}", stdout(&out));
+    assert_ne!(sel[0].0, "unlimited", "the clicks did not reach the overlay's budget: {}", stdout(&out));
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("clicked.json")).unwrap()).unwrap();
+    let h = &report["heuristic"];
+    let objects = h["objects"].as_array().unwrap();
+    let reported: Vec<u64> = objects.iter().filter(|o| o["selected"] == true).map(|o| o["id"].as_u64().unwrap()).collect();
+    assert_eq!(sel[0].1, reported, "the viewer's selection is the report's");
+    // The slider's middle is about half of everything's cost: some objects, not all.
+    assert!(!reported.is_empty() && reported.len() < objects.len(), "{reported:?} of {}", objects.len());
+    assert!(h["spent"].as_f64().unwrap() <= h["budget"].as_f64().unwrap(), "{h}");
+}

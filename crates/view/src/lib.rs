@@ -76,6 +76,8 @@ pub struct ViewOptions {
     pub script: Option<PathBuf>,
     pub clip_capsule: bool,
     pub sphere_effects: bool,
+    /// CPU backend: how the capsule finds each primary ray's sphere (`--capsule-visibility`).
+    pub primary_visibility: PrimaryVisibility,
 }
 
 /// Why the viewer stopped with an error.
@@ -209,6 +211,8 @@ struct App {
     script: Option<std::vec::IntoIter<Event>>,
     /// Frames left to let pass before the script goes on.
     wait_frames: u32,
+    /// `wait-ms`: the script goes on at this instant.
+    wait_until: Option<Instant>,
     looking: bool,
     /// Where the cursor is in the window (the window's centre until it moves).
     cursor: Option<(f64, f64)>,
@@ -260,7 +264,7 @@ impl App {
             knobs: RendererKnobs {
                 clip_capsule: options.clip_capsule,
                 sphere_effects: options.sphere_effects,
-                primary_visibility: PrimaryVisibility::Auto,
+                primary_visibility: options.primary_visibility,
             },
             heuristic,
             mode: options.mode,
@@ -277,6 +281,7 @@ impl App {
             options,
             script: script.map(|s| s.into_iter()),
             wait_frames: 0,
+            wait_until: None,
             looking: false,
             cursor: None,
             last_drag: None,
@@ -720,6 +725,12 @@ impl App {
             self.wait_frames -= 1;
             return true;
         }
+        if let Some(t) = self.wait_until {
+            if Instant::now() < t {
+                return true;
+            }
+            self.wait_until = None;
+        }
         while let Some(ev) = self.script.as_mut().and_then(|s| s.next()) {
             match ev {
                 Event::KeyDown(k) => self.key(event_loop, &k, true),
@@ -736,6 +747,10 @@ impl App {
                         self.wait_frames = n - 1;
                         return true;
                     }
+                }
+                Event::WaitMs(ms) => {
+                    self.wait_until = Some(Instant::now() + std::time::Duration::from_millis(ms as u64));
+                    return true;
                 }
                 Event::Resize(w, h) => {
                     if let Some(g) = &self.gfx {

@@ -183,7 +183,8 @@ fn panels(ctx: &egui::Context, m: &OverlayModel, actions: &mut Vec<Action>, budg
 }
 
 fn stats(ui: &mut egui::Ui, m: &OverlayModel, actions: &mut Vec<Action>) {
-    ui.label(format!("backend: {}", m.backend));
+    // One line each, truncated (hover shows all): rows keep their places whatever the numbers.
+    ui.add(egui::Label::new(format!("backend: {}", m.backend)).truncate());
     ui.horizontal(|ui| {
         ui.label("mode");
         let mut mode = m.mode;
@@ -197,13 +198,22 @@ fn stats(ui: &mut egui::Ui, m: &OverlayModel, actions: &mut Vec<Action>) {
         }
     });
     let last = m.history.back();
-    ui.label(format!("{:.1} fps · frame {:.2} ms · {}×{}", m.fps, last.map_or(0.0, |s| s.frame_ms), m.frame_size.0, m.frame_size.1));
-    if let Some(s) = last {
-        let src = if m.gpu_stage_times { "GPU" } else { "host" };
-        let parts: Vec<String> =
-            Stage::ALL.iter().filter(|st| s.stages[**st] > 0.0).map(|st| format!("{} {:.2}", st.name(), s.stages[*st])).collect();
-        ui.small(format!("{src} ms: {}", parts.join(" · ")));
-    }
+    ui.add(
+        egui::Label::new(format!(
+            "{:.1} fps · frame {:.2} ms · {}×{}",
+            m.fps,
+            last.map_or(0.0, |s| s.frame_ms),
+            m.frame_size.0,
+            m.frame_size.1
+        ))
+        .truncate(),
+    );
+    let src = if m.gpu_stage_times { "GPU" } else { "host" };
+    let parts: Vec<String> = match last {
+        Some(s) => Stage::ALL.iter().filter(|st| s.stages[**st] > 0.0).map(|st| format!("{} {:.2}", st.name(), s.stages[*st])).collect(),
+        None => vec!["no frame yet".into()],
+    };
+    ui.add(egui::Label::new(egui::RichText::new(format!("{src} ms: {}", parts.join(" · "))).small()).truncate());
     frame_graph(ui, m.history);
     ui.horizontal_wrapped(|ui| {
         for (st, c) in Stage::ALL.iter().zip(STAGE_COLORS) {
@@ -365,8 +375,8 @@ fn objects(ui: &mut egui::Ui, m: &OverlayModel, actions: &mut Vec<Action>) {
                 if dk.changed() || de.changed() {
                     actions.push(Action::SetObjectWeights(o.id, k, e));
                 }
-                ui.label(if o.s { "✔" } else { "" });
-                ui.label(if o.selected { "✔" } else { "" });
+                ui.label(if o.s { "yes" } else { "" });
+                ui.label(if o.selected { "yes" } else { "" });
                 ui.label(match (o.reflective, o.refractive) {
                     (true, true) => "refl+refr",
                     (true, false) => "refl",

@@ -10,6 +10,7 @@
 //! mouse-drag DX DY    # right-button drag (look, or orbit in orbit mode) by DX, DY pixels
 //! scroll N            # N wheel notches (speed)
 //! wait N              # let N frames render
+//! wait-ms N           # let frames render for N milliseconds of wall-clock time
 //! resize W H          # ask the window for a new inner size
 //! screenshot PATH     # the frame at full window size (no overlay) as PNG, report JSON beside it
 //! set mode hybrid     # what the overlay's controls set: mode hybrid|all|rt-only|raster,
@@ -45,6 +46,9 @@ pub enum Event {
     MouseDrag(f32, f32),
     Scroll(f32),
     Wait(u32),
+    /// Frames pass until this many milliseconds of wall-clock time have (for tests that drive
+    /// the window from outside, e.g. with xdotool).
+    WaitMs(u32),
     Resize(u32, u32),
     Screenshot(PathBuf),
     PrintCamera,
@@ -107,6 +111,10 @@ pub fn parse(path: &Path, text: &str) -> Result<Vec<Event>, String> {
             "wait" => {
                 want(1)?;
                 Event::Wait(count(args[0])?)
+            }
+            "wait-ms" => {
+                want(1)?;
+                Event::WaitMs(count(args[0])?)
             }
             "resize" => {
                 want(2)?;
