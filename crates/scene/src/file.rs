@@ -27,6 +27,7 @@ use crate::model::{
     MAX_SPOT_LIGHTS, Material, MaterialId, Mesh, Object, ObjectSource, PointCloud, PointColoring, PointLight, Policy, Skybox, SpotLight,
     TraceSettings, Transform,
 };
+use crate::normals::{DEFAULT_CREASE_ANGLE_DEG, compute_smooth_normals};
 use crate::primitives;
 use crate::texture::{ColorSpace, Texture, TextureId};
 use crate::{Scene, SceneError};
@@ -241,6 +242,7 @@ struct ObjectToml {
     stacks: Option<S<u32>>,
     model: Option<S<String>>,
     split: Option<S<bool>>,
+    crease_angle: Option<F>,
     position: Option<V3>,
     rotation: Option<V3>,
     scale: Option<S<ScaleToml>>,
@@ -764,6 +766,7 @@ impl Builder<'_> {
             }
             (Some(p), None) => {
                 self.forbid(o.split.as_ref().map(|s| s.span()), || "`split` applies to `model` objects only".into())?;
+                self.forbid(o.crease_angle.as_ref().map(|s| s.span()), || "`crease_angle` applies to `model` objects only".into())?;
                 let kind = *p.get_ref();
                 let kind_name = match kind {
                     PrimitiveKind::Plane => "plane",
@@ -810,6 +813,16 @@ impl Builder<'_> {
                 let stem = Path::new(m.get_ref()).file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
                 let name = o.name.as_ref().map_or_else(|| format!("{stem}-{}", index + 1), |n| n.get_ref().clone());
                 let override_material = o.material.as_ref().map(|v| self.material_ref(v, &name, names)).transpose()?;
+                // Smooth normals for meshes without them: OBJ and PLY at the default crease angle;
+                // glTF only when the scene asks (its specification wants flat shading there).
+                let is_gltf = matches!(crate::load::extension(&resolved).as_str(), "gltf" | "glb");
+                let crease = match &o.crease_angle {
+                    Some(_) => Some(self.num_in(&o.crease_angle, "crease_angle", 0.0, "between 0 and 180 (degrees)", |x| {
+                        (0.0..=180.0).contains(&x)
+                    })?),
+                    None if is_gltf => None,
+                    None => Some(DEFAULT_CREASE_ANGLE_DEG),
+                };
                 let mut meshes = match self.model_cache.get(&resolved) {
                     Some(meshes) => meshes.clone(),
                     None => {
@@ -831,6 +844,15 @@ impl Builder<'_> {
                 if let Some(id) = override_material {
                     for mesh in &mut meshes {
                         mesh.material = id;
+                    }
+                }
+                if let Some(crease) = crease {
+                    for mesh in meshes.iter_mut().filter(|m| m.normals.is_empty()) {
+                        compute_smooth_normals(mesh, crease);
+                        // Normal maps need tangents, which the loaders derive only from normals.
+                        if self.materials[mesh.material].normal_map.is_some() && !mesh.uvs.is_empty() {
+                            mesh.compute_tangents();
+                        }
                     }
                 }
                 let source = ObjectSource::Model(resolved);
