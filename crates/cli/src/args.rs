@@ -236,8 +236,9 @@ pub enum BackendChoice {
     Auto,
     /// The pure-Rust CPU backend.
     Cpu,
-    /// The wgpu backend on any adapter wgpu finds (Vulkan, Metal, DX12, GL; software adapters
-    /// such as Mesa's lavapipe included). No adapter is an error.
+    /// The wgpu backend on any adapter wgpu finds that can run it (Vulkan, Metal, DX12; software
+    /// adapters such as Mesa's lavapipe included; adapters lacking a format or limit the frame
+    /// needs, such as llvmpipe's OpenGL, are refused). No such adapter is an error.
     Gpu,
 }
 

@@ -218,3 +218,44 @@ fn inspect_prints_table_4_json_keys() {
     let plain = hybrid(&["inspect", scenes().join("demo.toml").to_str().unwrap()]);
     assert!(plain.status.success());
 }
+
+/// `hybrid` with `WGPU_BACKEND=gl`: only OpenGL adapters are seen (llvmpipe's GL in CI, from
+/// `libegl1` + `libgl1-mesa-dri`).
+fn hybrid_on_gl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hybrid")).args(args).env("WGPU_BACKEND", "gl").output().expect("run hybrid")
+}
+
+/// Issue 23: an OpenGL adapter cannot hold the frame's targets (llvmpipe's GL cannot render to
+/// `Rgba32Float`): `--backend gpu` refuses it up front with exit 2, naming the adapter and what it
+/// lacks (it used to fail inside wgpu with a validation error), and writes nothing.
+/// Fails (does not skip) when there is no GL adapter at all: the refusal is what is tested.
+#[test]
+fn gpu_backend_on_an_opengl_adapter_is_refused_with_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = hybrid_on_gl(&["render", "--quiet", "--backend", "gpu", "--size", "32x18", "-o", out.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert!(
+        !err.contains("no GPU adapter found"),
+        "no OpenGL adapter: install Mesa's GL (`apt-get install libegl1 libgl1-mesa-dri`) to run this test:\n{err}"
+    );
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let line = err.lines().find(|l| l.starts_with("error: --backend gpu:")).unwrap_or_else(|| panic!("one error line: {err}"));
+    assert!(line.contains("(Gl)") && line.contains("cannot run this backend") && line.contains("texture formats"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(files_in(dir.path()).is_empty());
+}
+
+/// With only an OpenGL adapter, `--backend auto` renders on the CPU, says so, and prints no
+/// `error:` line.
+#[test]
+fn auto_backend_on_opengl_falls_back_to_the_cpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = hybrid_on_gl(&["render", "--backend", "auto", "--size", "32x18", "-o", out.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("backend: cpu (auto:"), "{err}");
+    assert!(!err.lines().any(|l| l.trim_start().starts_with("error")), "{err}");
+    assert!(out.exists());
+}
