@@ -259,3 +259,40 @@ fn auto_backend_on_opengl_falls_back_to_the_cpu() {
     assert!(!err.lines().any(|l| l.trim_start().starts_with("error")), "{err}");
     assert!(out.exists());
 }
+
+/// `--quiet` prints nothing on success (as its help says); without it the result line names the
+/// stage times, with stage 1 called `primary rays` in rt-only (there is no raster there).
+#[test]
+fn quiet_prints_nothing_and_rt_only_has_no_raster_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = out.to_str().unwrap();
+    let q = hybrid(&["render", "--quiet", "--backend", "cpu", "--size", "32x18", "-o", o]);
+    assert!(q.status.success() && q.stderr.is_empty() && q.stdout.is_empty(), "{}", stderr(&q));
+    let help = String::from_utf8_lossy(&hybrid(&["render", "--help"]).stdout).into_owned();
+    assert!(help.contains("no result line"), "{help}");
+
+    let r = hybrid(&["render", "--backend", "cpu", "--size", "32x18", "--mode", "rt-only", "-o", o]);
+    let err = stderr(&r);
+    assert!(r.status.success(), "{err}");
+    let line = err.lines().find(|l| l.contains(" rt-only in ")).unwrap_or_else(|| panic!("a result line: {err}"));
+    assert!(line.contains("(primary rays ") && !line.contains("raster"), "{line}");
+    let h = hybrid(&["render", "--backend", "cpu", "--size", "32x18", "-o", o]);
+    let err = stderr(&h);
+    assert!(err.lines().any(|l| l.contains(" hybrid in ") && l.contains("(raster ")), "{err}");
+}
+
+/// `hybrid bench --help` explains its terms in plain words.
+#[test]
+fn bench_help_explains_its_terms() {
+    let o = hybrid(&["bench", "--help"]);
+    let help = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success());
+    for term in ["Table 4", "Table 5", "Table 6", "static set", "path set", "capsule", "FLIP", "rt-only", "primary rays"] {
+        assert!(help.contains(term), "`bench --help` does not explain `{term}`:\n{help}");
+    }
+    // The one-line summary in `hybrid --help` stays one line.
+    let top = String::from_utf8_lossy(&hybrid(&["--help"]).stdout).into_owned();
+    let bench = top.lines().find(|l| l.trim_start().starts_with("bench")).expect("bench in hybrid --help");
+    assert!(bench.contains("Tables 5 and 6") && !top.contains("Terms:"), "{top}");
+}
