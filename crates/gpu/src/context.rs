@@ -229,7 +229,10 @@ fn pick_adapter(mut adapters: Vec<wgpu::Adapter>, hardware_only: bool, which: &s
             let (adapter, why) = refused.swap_remove(0);
             GpuError::Unsupported { adapter, why }
         }
-        _ => GpuError::NoneUsable { which: which.into(), why: refused.iter().map(|(a, why)| format!("{a}: {why}")).collect::<Vec<_>>().join("; ") },
+        _ => GpuError::NoneUsable {
+            which: which.into(),
+            why: refused.iter().map(|(a, why)| format!("{a}: {why}")).collect::<Vec<_>>().join("; "),
+        },
     })
 }
 

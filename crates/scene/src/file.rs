@@ -508,16 +508,10 @@ impl Builder<'_> {
         let (m0, t0) = (self.materials.len(), self.textures.len());
         self.textures.extend(textures);
         for mut m in materials {
-            for id in [
-                &mut m.emission_map,
-                &mut m.ambient_map,
-                &mut m.diffuse_map,
-                &mut m.specular_map,
-                &mut m.normal_map,
-                &mut m.optical_map,
-            ]
-            .into_iter()
-            .flatten()
+            for id in
+                [&mut m.emission_map, &mut m.ambient_map, &mut m.diffuse_map, &mut m.specular_map, &mut m.normal_map, &mut m.optical_map]
+                    .into_iter()
+                    .flatten()
             {
                 *id += t0;
             }
@@ -877,9 +871,9 @@ impl Builder<'_> {
                 // glTF only when the scene asks (its specification wants flat shading there).
                 let is_gltf = matches!(crate::load::extension(&resolved).as_str(), "gltf" | "glb");
                 let crease = match &o.crease_angle {
-                    Some(_) => Some(self.num_in(&o.crease_angle, "crease_angle", 0.0, "between 0 and 180 (degrees)", |x| {
-                        (0.0..=180.0).contains(&x)
-                    })?),
+                    Some(_) => Some(
+                        self.num_in(&o.crease_angle, "crease_angle", 0.0, "between 0 and 180 (degrees)", |x| (0.0..=180.0).contains(&x))?,
+                    ),
                     None if is_gltf => None,
                     None => Some(DEFAULT_CREASE_ANGLE_DEG),
                 };

@@ -18,7 +18,7 @@ pub use camera::{Camera, CameraPath, Keyframe, Projection};
 pub use error::SceneError;
 pub use file::{DEMO_SCENE_TOML, MAX_TRACE_DEPTH, demo_scene, load_scene, parse_scene};
 pub use model::*;
-pub use normals::{DEFAULT_CREASE_ANGLE_DEG, compute_smooth_normals};
 pub use model_scene::{ACCEPTED_INPUTS, InputKind, input_kind, load_scene_or_model, model_scene_toml};
+pub use normals::{DEFAULT_CREASE_ANGLE_DEG, compute_smooth_normals};
 pub use stats::SceneStats;
 pub use texture::{ColorSpace, Texture, TextureId};

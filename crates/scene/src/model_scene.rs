@@ -13,9 +13,9 @@ use std::path::{Component, Path, PathBuf};
 
 use glam::Vec3;
 
+use crate::file::{Preloaded, parse_scene_preloaded};
 use crate::load::{MAX_MODEL_BYTES, check_file, load_model, load_point_cloud};
 use crate::model::Aabb;
-use crate::file::{Preloaded, parse_scene_preloaded};
 use crate::{Scene, SceneError, load_scene};
 
 /// What `render`, `bench` and `inspect` accept, for error messages.
