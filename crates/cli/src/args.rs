@@ -25,7 +25,45 @@ pub enum Command {
     Render(RenderArgs),
     /// Load and validate a scene and print its statistics (the paper's Table 4 row).
     Inspect(InspectArgs),
-    /// The paper's experiments (Tables 5 and 6) on one scene, with image error (FLIP) against rt-only.
+    /// The paper's experiments (Tables 5 and 6) on one scene, with image error (FLIP) against rt-only
+    ///
+    /// Repeats the timing tables of Walewski et al. 2019 on one scene, for each mode of --modes,
+    /// prints them (Markdown, on stdout) and writes bench.json, frames.csv and frame_times.png
+    /// (with --sweep-budget also sweep.csv and sweep.png) into --out. BENCHMARKS.md has results
+    /// and the commands that made them.
+    ///
+    /// Terms:
+    ///
+    /// - Table 5 and Table 6: the paper's tables of frame and stage times, one for the static
+    ///   set and one for the path set. (The paper's Table 4, the size of each test scene, is
+    ///   what `hybrid inspect` prints.)
+    ///
+    /// - static set (Table 5): --frames frames from the scene's own camera, after 2 warm-up
+    ///   frames, each mode with a fresh renderer; mean and 95th percentile per stage.
+    ///
+    /// - path set (Table 6): the scene's camera path ([camera_path] in the scene file) played at
+    ///   --fps frames per second of path time for --path-seconds, every frame rendered as fast as
+    ///   it goes. Skipped when the scene has no camera path.
+    ///
+    /// - modes: hybrid (the heuristic chooses which objects get ray-traced shadows, reflections
+    ///   and refractions), all (every visible object gets them), rt-only (no rasterization:
+    ///   primary rays fill the G-buffer and everything is ray traced; the reference image),
+    ///   raster (no ray tracing).
+    ///
+    /// - FLIP: a perceptual image difference (0 = the same image, 1 = as different as can be)
+    ///   of a frame against the rt-only frame from the same camera.
+    ///
+    /// - capsule: the renderer of the scene's point clouds (Timokhin & Mikhaylyuk): their
+    ///   points, drawn as spheres, are ray traced into a colour + depth frame that is merged by
+    ///   depth with the polygons. Its time is the CAPSULE row (absent without point clouds).
+    ///
+    /// - stages: RAST = the G-buffer and its deferred lighting (in rt-only made by primary rays,
+    ///   not rasterized; files still call it `raster`), HEUR = the heuristic, RAYT = the
+    ///   shadow/reflection/refraction rays, BLEND = combining them into the final image.
+    ///
+    /// - sweep (--sweep-budget): hybrid frames at several cost budgets with both selection
+    ///   policies, to plot image error against frame time.
+    #[command(verbatim_doc_comment)]
     Bench(BenchArgs),
     /// Open a scene (the built-in demo scene when none is given) in an interactive window.
     View(ViewArgs),
@@ -104,7 +142,8 @@ pub struct RenderArgs {
     pub threads: Option<usize>,
     #[command(flatten)]
     pub capsule: CapsuleArgs,
-    /// No progress bar.
+    /// Print nothing on success: no progress bar, no backend line and no result line (the
+    /// image is still written). Warnings and errors are still printed.
     #[arg(short, long)]
     pub quiet: bool,
 }
@@ -157,7 +196,8 @@ pub struct BenchArgs {
     pub threads: Option<usize>,
     #[command(flatten)]
     pub capsule: CapsuleArgs,
-    /// No progress lines on stderr.
+    /// No progress lines and no backend line on stderr; the tables are still printed on stdout
+    /// and the files written. Warnings and errors are still printed.
     #[arg(short, long)]
     pub quiet: bool,
 }
@@ -237,8 +277,9 @@ pub enum BackendChoice {
     Auto,
     /// The pure-Rust CPU backend.
     Cpu,
-    /// The wgpu backend on any adapter wgpu finds (Vulkan, Metal, DX12, GL; software adapters
-    /// such as Mesa's lavapipe included). No adapter is an error.
+    /// The wgpu backend on any adapter wgpu finds that can run it (Vulkan, Metal, DX12; software
+    /// adapters such as Mesa's lavapipe included; adapters lacking a format or limit the frame
+    /// needs, such as llvmpipe's OpenGL, are refused). No such adapter is an error.
     Gpu,
 }
 

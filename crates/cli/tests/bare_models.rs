@@ -117,3 +117,52 @@ fn auto_backend_prints_no_error_lines_on_success() {
     assert!(r.status.success(), "{err}");
     assert!(!err.lines().any(|l| l.trim_start().starts_with("error")), "{err}");
 }
+
+/// Mean squared difference (0..255 per channel, summed over RGB) between horizontally
+/// neighbouring pixels of the dumped normal buffer where both show object 0 (the model), and how
+/// many pairs there were. Squared, so that a flat mesh's jumps at its edges count for more than
+/// the small steady changes of a smooth one.
+fn normal_roughness(dump: &Path) -> (f64, usize) {
+    let normal = image::open(dump.join("normal.png")).unwrap().to_rgb8();
+    let ids = image::open(dump.join("object_id.png")).unwrap().to_luma16();
+    let (mut sum, mut pairs) = (0u64, 0usize);
+    for y in 0..normal.height() {
+        for x in 0..normal.width() - 1 {
+            if ids.get_pixel(x, y).0[0] == 1 && ids.get_pixel(x + 1, y).0[0] == 1 {
+                let (a, b) = (normal.get_pixel(x, y).0, normal.get_pixel(x + 1, y).0);
+                sum += (0..3).map(|c| (a[c].abs_diff(b[c]) as u64).pow(2)).sum::<u64>();
+                pairs += 1;
+            }
+        }
+    }
+    (sum as f64 / pairs.max(1) as f64, pairs)
+}
+
+/// Issue 23: the bunny (an OBJ without normals) is shaded with smooth vertex normals: its normal
+/// buffer changes less from pixel to pixel than with `crease_angle = 0` (every face flat, as it
+/// rendered before).
+#[test]
+fn a_model_without_normals_is_shaded_smooth() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let toml = d.join("bunny.toml");
+    let (smooth, flat) = (d.join("smooth"), d.join("flat"));
+    let model = asset("stanford-bunny/stanford-bunny.obj");
+    let size = ["--size", "640x480", "--backend", "cpu", "--quiet"];
+    let run = |args: &[&str]| {
+        let r = hybrid(&[args, &size[..]].concat());
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    };
+    let out = d.join("o.png");
+    let out = out.to_str().unwrap();
+    run(&["render", &model, "-o", out, "--save-scene", toml.to_str().unwrap(), "--dump", smooth.to_str().unwrap()]);
+    let text = std::fs::read_to_string(&toml).unwrap();
+    let model_line = text.lines().find(|l| l.starts_with("model = ")).expect("the model's line").to_string();
+    std::fs::write(&toml, text.replace(&model_line, &format!("{model_line}\ncrease_angle = 0"))).unwrap();
+    run(&["render", toml.to_str().unwrap(), "-o", out, "--dump", flat.to_str().unwrap()]);
+    let (s, s_pairs) = normal_roughness(&smooth);
+    let (f, f_pairs) = normal_roughness(&flat);
+    eprintln!("normal change between neighbouring pixels: smooth {s:.2} ({s_pairs} pairs), flat {f:.2} ({f_pairs} pairs)");
+    assert!(s_pairs > 2000 && s_pairs == f_pairs, "the bunny covers {s_pairs} / {f_pairs} pixel pairs");
+    assert!(s < 0.6 * f, "smooth normals should change less between pixels: smooth {s:.2}, flat {f:.2}");
+}

@@ -218,3 +218,81 @@ fn inspect_prints_table_4_json_keys() {
     let plain = hybrid(&["inspect", scenes().join("demo.toml").to_str().unwrap()]);
     assert!(plain.status.success());
 }
+
+/// `hybrid` with `WGPU_BACKEND=gl`: only OpenGL adapters are seen (llvmpipe's GL in CI, from
+/// `libegl1` + `libgl1-mesa-dri`).
+fn hybrid_on_gl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_hybrid")).args(args).env("WGPU_BACKEND", "gl").output().expect("run hybrid")
+}
+
+/// Issue 23: an OpenGL adapter cannot hold the frame's targets (llvmpipe's GL cannot render to
+/// `Rgba32Float`): `--backend gpu` refuses it up front with exit 2, naming the adapter and what it
+/// lacks (it used to fail inside wgpu with a validation error), and writes nothing.
+/// Fails (does not skip) when there is no GL adapter at all: the refusal is what is tested.
+#[test]
+fn gpu_backend_on_an_opengl_adapter_is_refused_with_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = hybrid_on_gl(&["render", "--quiet", "--backend", "gpu", "--size", "32x18", "-o", out.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert!(
+        !err.contains("no GPU adapter found"),
+        "no OpenGL adapter: install Mesa's GL (`apt-get install libegl1 libgl1-mesa-dri`) to run this test:\n{err}"
+    );
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let line = err.lines().find(|l| l.starts_with("error: --backend gpu:")).unwrap_or_else(|| panic!("one error line: {err}"));
+    assert!(line.contains("(Gl)") && line.contains("cannot run this backend") && line.contains("texture formats"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(files_in(dir.path()).is_empty());
+}
+
+/// With only an OpenGL adapter, `--backend auto` renders on the CPU, says so, and prints no
+/// `error:` line.
+#[test]
+fn auto_backend_on_opengl_falls_back_to_the_cpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = hybrid_on_gl(&["render", "--backend", "auto", "--size", "32x18", "-o", out.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("backend: cpu (auto:"), "{err}");
+    assert!(!err.lines().any(|l| l.trim_start().starts_with("error")), "{err}");
+    assert!(out.exists());
+}
+
+/// `--quiet` prints nothing on success (as its help says); without it the result line names the
+/// stage times, with stage 1 called `primary rays` in rt-only (there is no raster there).
+#[test]
+fn quiet_prints_nothing_and_rt_only_has_no_raster_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = out.to_str().unwrap();
+    let q = hybrid(&["render", "--quiet", "--backend", "cpu", "--size", "32x18", "-o", o]);
+    assert!(q.status.success() && q.stderr.is_empty() && q.stdout.is_empty(), "{}", stderr(&q));
+    let help = String::from_utf8_lossy(&hybrid(&["render", "--help"]).stdout).into_owned();
+    assert!(help.contains("no result line"), "{help}");
+
+    let r = hybrid(&["render", "--backend", "cpu", "--size", "32x18", "--mode", "rt-only", "-o", o]);
+    let err = stderr(&r);
+    assert!(r.status.success(), "{err}");
+    let line = err.lines().find(|l| l.contains(" rt-only in ")).unwrap_or_else(|| panic!("a result line: {err}"));
+    assert!(line.contains("(primary rays ") && !line.contains("raster"), "{line}");
+    let h = hybrid(&["render", "--backend", "cpu", "--size", "32x18", "-o", o]);
+    let err = stderr(&h);
+    assert!(err.lines().any(|l| l.contains(" hybrid in ") && l.contains("(raster ")), "{err}");
+}
+
+/// `hybrid bench --help` explains its terms in plain words.
+#[test]
+fn bench_help_explains_its_terms() {
+    let o = hybrid(&["bench", "--help"]);
+    let help = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success());
+    for term in ["Table 4", "Table 5", "Table 6", "static set", "path set", "capsule", "FLIP", "rt-only", "primary rays"] {
+        assert!(help.contains(term), "`bench --help` does not explain `{term}`:\n{help}");
+    }
+    // The one-line summary in `hybrid --help` stays one line.
+    let top = String::from_utf8_lossy(&hybrid(&["--help"]).stdout).into_owned();
+    let bench = top.lines().find(|l| l.trim_start().starts_with("bench")).expect("bench in hybrid --help");
+    assert!(bench.contains("Tables 5 and 6") && !top.contains("Terms:"), "{top}");
+}

@@ -21,6 +21,8 @@ pub enum GpuError {
     },
     #[error("the GPU adapter `{adapter}` cannot run this backend: {why}")]
     Unsupported { adapter: String, why: String },
+    #[error("no GPU adapter can run this backend ({which}): {why}")]
+    NoneUsable { which: String, why: String },
     #[error("the scene does not fit the GPU adapter `{adapter}`: {why}")]
     TooLarge { adapter: String, why: String },
     #[error("GPU error: {0}")]
@@ -146,8 +148,10 @@ impl GpuContext {
 }
 
 /// What the passes need beyond wgpu's defaults: compute shaders, the G-buffer's 8 colour targets
-/// (68 bytes per pixel), 16 storage buffers per stage (the trace passes bind 15), 3 bind groups.
-/// `None` when the adapter has all of it, else what it lacks.
+/// (68 bytes per pixel), 16 storage buffers per stage (the trace passes bind 15), 3 bind groups,
+/// and every frame target's format usable as the frame uses it (rendered to, sampled, copied and,
+/// but for depth, written as a storage texture: OpenGL adapters fail this, e.g. llvmpipe's GL
+/// cannot render to `Rgba32Float`). `None` when the adapter has all of it, else what it lacks.
 fn missing_capability(adapter: &wgpu::Adapter) -> Option<String> {
     if !adapter.get_downlevel_capabilities().flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS) {
         return Some("no compute shaders".into());
@@ -159,7 +163,40 @@ fn missing_capability(adapter: &wgpu::Adapter) -> Option<String> {
         ("storage buffers per shader stage", l.max_storage_buffers_per_shader_stage, 16),
         ("bind groups", l.max_bind_groups, 3),
     ];
-    needs.iter().find(|(_, has, need)| has < need).map(|(what, has, need)| format!("{what}: {has}, needs {need}"))
+    if let Some((what, has, need)) = needs.iter().find(|(_, has, need)| has < need) {
+        return Some(format!("{what}: {has}, needs {need}"));
+    }
+    let lacking: Vec<String> = crate::targets::TARGET_FORMATS
+        .iter()
+        .filter_map(|&format| {
+            let features = adapter.get_texture_format_features(format);
+            let usages = crate::targets::target_usages(format);
+            let mut missing = usage_names(usages - features.allowed_usages);
+            if usages.contains(wgpu::TextureUsages::STORAGE_BINDING)
+                && !features.flags.contains(wgpu::TextureFormatFeatureFlags::STORAGE_WRITE_ONLY)
+                && !missing.contains(&"storage")
+            {
+                missing.push("storage");
+            }
+            (!missing.is_empty()).then(|| format!("{format:?} cannot be used as {}", missing.join(", ")))
+        })
+        .collect();
+    (!lacking.is_empty()).then(|| format!("texture formats the frame needs: {}", lacking.join("; ")))
+}
+
+/// Plain names of texture usages, for messages.
+fn usage_names(usages: wgpu::TextureUsages) -> Vec<&'static str> {
+    [
+        (wgpu::TextureUsages::RENDER_ATTACHMENT, "render target"),
+        (wgpu::TextureUsages::TEXTURE_BINDING, "sampled texture"),
+        (wgpu::TextureUsages::STORAGE_BINDING, "storage"),
+        (wgpu::TextureUsages::COPY_SRC, "copy source"),
+        (wgpu::TextureUsages::COPY_DST, "copy destination"),
+    ]
+    .into_iter()
+    .filter(|(u, _)| usages.contains(*u))
+    .map(|(_, name)| name)
+    .collect()
 }
 
 /// The best of `adapters` (ranked; `HYBRID_ADAPTER=<substring>` picks one by name), skipping
@@ -181,12 +218,21 @@ fn pick_adapter(mut adapters: Vec<wgpu::Adapter>, hardware_only: bool, which: &s
     adapters.retain(|a| match missing_capability(a) {
         None => true,
         Some(why) => {
-            refused.push(format!("{}: {why}", a.get_info().name));
+            let info = a.get_info();
+            refused.push((format!("{} ({:?})", info.name, info.backend), why));
             false
         }
     });
-    adapters.into_iter().next().ok_or_else(|| {
-        if refused.is_empty() { GpuError::NoAdapter } else { GpuError::Unsupported { adapter: which.into(), why: refused.join("; ") } }
+    adapters.into_iter().next().ok_or_else(|| match refused.len() {
+        0 => GpuError::NoAdapter,
+        1 => {
+            let (adapter, why) = refused.swap_remove(0);
+            GpuError::Unsupported { adapter, why }
+        }
+        _ => GpuError::NoneUsable {
+            which: which.into(),
+            why: refused.iter().map(|(a, why)| format!("{a}: {why}")).collect::<Vec<_>>().join("; "),
+        },
     })
 }
 

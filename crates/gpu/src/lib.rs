@@ -1,6 +1,7 @@
 //! `hybrid-gpu`: the wgpu backend (design §1). The same stages as `hybrid-cpu`, as GPU passes
-//! (WGSL beside the Rust in `src/shaders/`), headless on any wgpu adapter (Vulkan, Metal, DX12,
-//! GL; Mesa's lavapipe in CI). The CPU backend is its oracle in tests.
+//! (WGSL beside the Rust in `src/shaders/`), headless on any wgpu adapter (Vulkan, Metal, DX12;
+//! Mesa's lavapipe in CI) that can hold the frame's targets: OpenGL adapters are refused (see
+//! `context`). The CPU backend is its oracle in tests.
 
 pub mod blend;
 pub mod bvh;

@@ -28,6 +28,22 @@ pub const GBUFFER_COLOR_FORMATS: [wgpu::TextureFormat; 8] = [
     OBJECT_ID_FORMAT, // 7 object id
 ];
 
+/// Every format a frame target has (see [`FrameTargets::new`]).
+pub const TARGET_FORMATS: [wgpu::TextureFormat; 7] =
+    [POSITION_FORMAT, COLOR_FORMAT, OBJECT_ID_FORMAT, MASK_FORMAT, DEPTH_FORMAT, FINAL_FORMAT, PACKED_FORMAT];
+
+/// The usages [`Target::new`] gives a texture of `format`.
+pub fn target_usages(format: wgpu::TextureFormat) -> wgpu::TextureUsages {
+    let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+        | wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::COPY_SRC
+        | wgpu::TextureUsages::COPY_DST;
+    if format != DEPTH_FORMAT {
+        usage |= wgpu::TextureUsages::STORAGE_BINDING;
+    }
+    usage
+}
+
 /// One texture and its default view.
 pub struct Target {
     pub texture: wgpu::Texture,
@@ -36,13 +52,7 @@ pub struct Target {
 
 impl Target {
     pub fn new(device: &wgpu::Device, label: &str, width: u32, height: u32, format: wgpu::TextureFormat) -> Self {
-        let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT
-            | wgpu::TextureUsages::TEXTURE_BINDING
-            | wgpu::TextureUsages::COPY_SRC
-            | wgpu::TextureUsages::COPY_DST;
-        if format != DEPTH_FORMAT {
-            usage |= wgpu::TextureUsages::STORAGE_BINDING;
-        }
+        let usage = target_usages(format);
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
             size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },

@@ -27,6 +27,7 @@ use crate::model::{
     MAX_SPOT_LIGHTS, Material, MaterialId, Mesh, Object, ObjectSource, PointCloud, PointColoring, PointLight, Policy, Skybox, SpotLight,
     TraceSettings, Transform,
 };
+use crate::normals::{DEFAULT_CREASE_ANGLE_DEG, compute_smooth_normals};
 use crate::primitives;
 use crate::texture::{ColorSpace, Texture, TextureId};
 use crate::{Scene, SceneError};
@@ -46,6 +47,26 @@ pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
 
 /// Parses scene TOML `text`; `path` names it in errors and is the base of relative paths.
 pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
+    parse_scene_preloaded(text, path, None)
+}
+
+/// A model or point-cloud file already loaded (the bare-model path loads it for its bounds),
+/// handed to the scene parser so that the file is not read a second time.
+pub(crate) enum Preloaded {
+    /// [`load_model`]'s result, its materials and textures loaded into vectors of their own.
+    Model { path: PathBuf, meshes: Vec<Mesh>, materials: Vec<Material>, textures: Vec<Texture> },
+    /// [`load_point_cloud`]'s result.
+    Points { path: PathBuf, points: Vec<Vec3>, colors: Vec<[u8; 3]> },
+}
+
+/// Whether `a` and `b` name the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
+}
+
+/// [`parse_scene`], with the first model or point cloud that names `preloaded`'s file taken
+/// from it instead of loading the file.
+pub(crate) fn parse_scene_preloaded(text: &str, path: &Path, preloaded: Option<Preloaded>) -> Result<Scene, SceneError> {
     let file: SceneFile = toml::from_str(text).map_err(|e| match e.span() {
         Some(span) => SceneError::at(path, text, span, e.message().trim_end()),
         None => SceneError::new(path, e.message().trim_end()),
@@ -59,6 +80,7 @@ pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
         textures: Vec::new(),
         texture_cache: HashMap::new(),
         model_cache: HashMap::new(),
+        preloaded,
     };
     b.build(file)
 }
@@ -241,6 +263,7 @@ struct ObjectToml {
     stacks: Option<S<u32>>,
     model: Option<S<String>>,
     split: Option<S<bool>>,
+    crease_angle: Option<F>,
     position: Option<V3>,
     rotation: Option<V3>,
     scale: Option<S<ScaleToml>>,
@@ -347,6 +370,8 @@ struct Builder<'a> {
     texture_cache: HashMap<(PathBuf, bool), TextureId>,
     /// resolved model path → meshes (materials already appended once).
     model_cache: HashMap<PathBuf, Vec<Mesh>>,
+    /// A file the caller already loaded; taken by the first entry that names it.
+    preloaded: Option<Preloaded>,
 }
 
 fn v3(a: [f32; 3]) -> Vec3 {
@@ -471,6 +496,37 @@ impl Builder<'_> {
             return Err(self.err(v.span(), format!("{what} file `{written}` {why} (resolved to `{}`)", resolved.display())));
         }
         Ok(resolved)
+    }
+
+    /// The preloaded model at `resolved`, if there is one: its textures and materials are appended
+    /// to the scene's (texture and material ids shifted to match), as [`load_model`] would have.
+    fn take_preloaded_model(&mut self, resolved: &Path) -> Option<Vec<Mesh>> {
+        if !matches!(&self.preloaded, Some(Preloaded::Model { path, .. }) if same_file(path, resolved)) {
+            return None;
+        }
+        let Some(Preloaded::Model { meshes, materials, textures, .. }) = self.preloaded.take() else { return None };
+        let (m0, t0) = (self.materials.len(), self.textures.len());
+        self.textures.extend(textures);
+        for mut m in materials {
+            for id in
+                [&mut m.emission_map, &mut m.ambient_map, &mut m.diffuse_map, &mut m.specular_map, &mut m.normal_map, &mut m.optical_map]
+                    .into_iter()
+                    .flatten()
+            {
+                *id += t0;
+            }
+            self.materials.push(m);
+        }
+        Some(meshes.into_iter().map(|mesh| Mesh { material: mesh.material + m0, ..mesh }).collect())
+    }
+
+    /// The preloaded point cloud at `resolved`, if there is one.
+    fn take_preloaded_points(&mut self, resolved: &Path) -> Option<(Vec<Vec3>, Vec<[u8; 3]>)> {
+        if !matches!(&self.preloaded, Some(Preloaded::Points { path, .. }) if same_file(path, resolved)) {
+            return None;
+        }
+        let Some(Preloaded::Points { points, colors, .. }) = self.preloaded.take() else { return None };
+        Some((points, colors))
     }
 
     fn texture(&mut self, v: &S<String>, cs: ColorSpace) -> Res<TextureId> {
@@ -764,6 +820,7 @@ impl Builder<'_> {
             }
             (Some(p), None) => {
                 self.forbid(o.split.as_ref().map(|s| s.span()), || "`split` applies to `model` objects only".into())?;
+                self.forbid(o.crease_angle.as_ref().map(|s| s.span()), || "`crease_angle` applies to `model` objects only".into())?;
                 let kind = *p.get_ref();
                 let kind_name = match kind {
                     PrimitiveKind::Plane => "plane",
@@ -810,11 +867,24 @@ impl Builder<'_> {
                 let stem = Path::new(m.get_ref()).file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
                 let name = o.name.as_ref().map_or_else(|| format!("{stem}-{}", index + 1), |n| n.get_ref().clone());
                 let override_material = o.material.as_ref().map(|v| self.material_ref(v, &name, names)).transpose()?;
+                // Smooth normals for meshes without them: OBJ and PLY at the default crease angle;
+                // glTF only when the scene asks (its specification wants flat shading there).
+                let is_gltf = matches!(crate::load::extension(&resolved).as_str(), "gltf" | "glb");
+                let crease = match &o.crease_angle {
+                    Some(_) => Some(
+                        self.num_in(&o.crease_angle, "crease_angle", 0.0, "between 0 and 180 (degrees)", |x| (0.0..=180.0).contains(&x))?,
+                    ),
+                    None if is_gltf => None,
+                    None => Some(DEFAULT_CREASE_ANGLE_DEG),
+                };
                 let mut meshes = match self.model_cache.get(&resolved) {
                     Some(meshes) => meshes.clone(),
                     None => {
-                        let meshes = load_model(&resolved, &mut self.materials, &mut self.textures)
-                            .map_err(|e| self.err(m.span(), format!("cannot load model `{}`: {e}", m.get_ref())))?;
+                        let meshes = match self.take_preloaded_model(&resolved) {
+                            Some(meshes) => meshes,
+                            None => load_model(&resolved, &mut self.materials, &mut self.textures)
+                                .map_err(|e| self.err(m.span(), format!("cannot load model `{}`: {e}", m.get_ref())))?,
+                        };
                         self.model_cache.insert(resolved.clone(), meshes.clone());
                         meshes
                     }
@@ -831,6 +901,15 @@ impl Builder<'_> {
                 if let Some(id) = override_material {
                     for mesh in &mut meshes {
                         mesh.material = id;
+                    }
+                }
+                if let Some(crease) = crease {
+                    for mesh in meshes.iter_mut().filter(|m| m.normals.is_empty()) {
+                        compute_smooth_normals(mesh, crease);
+                        // Normal maps need tangents, which the loaders derive only from normals.
+                        if self.materials[mesh.material].normal_map.is_some() && !mesh.uvs.is_empty() {
+                            mesh.compute_tangents();
+                        }
                     }
                 }
                 let source = ObjectSource::Model(resolved);
@@ -954,8 +1033,11 @@ impl Builder<'_> {
         let specular = self.color_or(&p.specular, "specular", Vec3::splat(0.1))?;
         let shininess = self.unit(&p.shininess, "shininess", 0.2)?;
         let resolved = self.file(&p.file, "point-cloud")?;
-        let (mut points, colors) = load_point_cloud(&resolved)
-            .map_err(|e| self.err(p.file.span(), format!("cannot load point cloud `{}`: {e}", p.file.get_ref())))?;
+        let (mut points, colors) = match self.take_preloaded_points(&resolved) {
+            Some(loaded) => loaded,
+            None => load_point_cloud(&resolved)
+                .map_err(|e| self.err(p.file.span(), format!("cannot load point cloud `{}`: {e}", p.file.get_ref())))?,
+        };
         if !colors.is_empty() && colors.len() != points.len() {
             return Err(self
                 .err(p.file.span(), format!("point cloud `{}`: {} colours for {} points", p.file.get_ref(), colors.len(), points.len())));

@@ -2,6 +2,8 @@
 //! with a camera framing the model's bounds, a sun that casts shadows, a sky, and a ground plane
 //! under the model. The scene is made as TOML text (see [`model_scene_toml`]) and loaded through
 //! the ordinary scene-file parser, so `--save-scene` writes exactly the scene that is rendered.
+//! The model file is read once: what was loaded to find its bounds is handed to the parser, which
+//! takes it instead of loading the file named in the text again.
 
 // The public API returns the crate's `SceneError` by value, like `load_scene`.
 #![allow(clippy::result_large_err)]
@@ -11,9 +13,10 @@ use std::path::{Component, Path, PathBuf};
 
 use glam::Vec3;
 
+use crate::file::{Preloaded, parse_scene_preloaded};
 use crate::load::{MAX_MODEL_BYTES, check_file, load_model, load_point_cloud};
 use crate::model::Aabb;
-use crate::{Scene, SceneError, load_scene, parse_scene};
+use crate::{Scene, SceneError, load_scene};
 
 /// What `render`, `bench` and `inspect` accept, for error messages.
 pub const ACCEPTED_INPUTS: &str = "a scene file (.toml) or a model file (.gltf, .glb, .obj, .ply; point clouds .ply, .las, .laz)";
@@ -84,8 +87,9 @@ pub fn load_scene_or_model(path: &Path) -> Result<Scene, SceneError> {
             let dir = path.parent().unwrap_or(Path::new(""));
             let stem = path.file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
             let virtual_file = dir.join(format!("{stem}.scene.toml"));
-            let text = model_scene_toml(path, &virtual_file)?;
-            let mut scene = parse_scene(&text, &virtual_file)?;
+            // The model is loaded once: for the bounds the scene frames, then handed to the parser.
+            let (text, preloaded) = model_scene(path, &virtual_file)?;
+            let mut scene = parse_scene_preloaded(&text, &virtual_file, Some(preloaded))?;
             scene.source = Some(path.to_path_buf());
             Ok(scene)
         }
@@ -95,31 +99,32 @@ pub fn load_scene_or_model(path: &Path) -> Result<Scene, SceneError> {
 /// The default scene around the model or point cloud `model` as scene-file TOML, with the
 /// model's path written relative to the directory of `scene_file` (where the text will be saved).
 pub fn model_scene_toml(model: &Path, scene_file: &Path) -> Result<String, SceneError> {
+    model_scene(model, scene_file).map(|(text, _)| text)
+}
+
+/// [`model_scene_toml`], and the model or point cloud it loaded to find the bounds.
+fn model_scene(model: &Path, scene_file: &Path) -> Result<(String, Preloaded), SceneError> {
     let kind = input_kind(model)?;
-    let bounds = match kind {
+    let mut bounds = Aabb::EMPTY;
+    let preloaded = match kind {
         InputKind::Scene => return Err(SceneError::new(model, "is a scene file, not a model")),
         InputKind::Model => {
-            let meshes = load_model(model, &mut Vec::new(), &mut Vec::new())?;
-            let mut b = Aabb::EMPTY;
-            for p in meshes.iter().flat_map(|m| m.positions.iter()) {
-                b.grow(*p);
-            }
-            b
+            let (mut materials, mut textures) = (Vec::new(), Vec::new());
+            let meshes = load_model(model, &mut materials, &mut textures)?;
+            meshes.iter().flat_map(|m| m.positions.iter()).for_each(|p| bounds.grow(*p));
+            Preloaded::Model { path: model.to_path_buf(), meshes, materials, textures }
         }
         InputKind::PointCloud => {
-            let (points, _) = load_point_cloud(model)?;
-            let mut b = Aabb::EMPTY;
-            for p in &points {
-                b.grow(*p);
-            }
-            b
+            let (points, colors) = load_point_cloud(model)?;
+            points.iter().for_each(|p| bounds.grow(*p));
+            Preloaded::Points { path: model.to_path_buf(), points, colors }
         }
     };
     if bounds.is_empty() {
         return Err(SceneError::new(model, "the model has no vertices, so there is nothing to frame"));
     }
     let rel = relative_path(model, scene_file.parent().unwrap_or(Path::new("")));
-    Ok(scene_text(&rel, kind, bounds))
+    Ok((scene_text(&rel, kind, bounds), preloaded))
 }
 
 /// `target` relative to `base` (both made absolute against the working directory first), with
@@ -247,6 +252,40 @@ mod tests {
     fn unknown_extensions_say_what_is_accepted() {
         let e = input_kind(Path::new("notes.txt")).unwrap_err();
         assert!(e.message.contains(".gltf") && e.message.contains(".toml") && e.to_string().contains("notes.txt"), "{e}");
+    }
+
+    #[test]
+    fn the_preloaded_model_gives_the_scene_its_saved_text_gives() {
+        // An OBJ with a textured material: the bare-model scene takes the model as it was loaded
+        // for the bounds, so its material and texture ids must be shifted past the scene's own
+        // (the ground material) exactly as loading the file from the saved text shifts them.
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        image::RgbaImage::from_fn(4, 4, |x, y| image::Rgba([(x * 60) as u8, (y * 60) as u8, 90, 255])).save(d.join("t.png")).unwrap();
+        std::fs::write(d.join("m.mtl"), "newmtl red\nKd 0.8 0.1 0.1\nmap_Kd t.png\nnewmtl blue\nKd 0.1 0.1 0.8\n").unwrap();
+        let obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+                   usemtl red\nf 1/1 2/2 3/3\nusemtl blue\nf 1/1 3/3 4/4\n";
+        std::fs::write(d.join("m.obj"), obj).unwrap();
+        let model = d.join("m.obj");
+        let direct = load_scene_or_model(&model).unwrap();
+        let saved = d.join("m.scene.toml");
+        std::fs::write(&saved, model_scene_toml(&model, &saved).unwrap()).unwrap();
+        let from_text = load_scene(&saved).unwrap();
+        assert_eq!(direct.materials, from_text.materials);
+        assert_eq!(direct.textures, from_text.textures);
+        assert_eq!(direct.objects.len(), from_text.objects.len());
+        for (a, b) in direct.objects.iter().zip(&from_text.objects) {
+            assert_eq!(a.meshes, b.meshes, "object {}", a.name);
+        }
+        let red = &direct.materials[direct.objects[0].meshes[0].material];
+        assert_eq!((red.name.as_str(), red.diffuse_map), ("red", Some(0)));
+        assert_eq!(direct.materials[0].name, "ground");
+
+        // A point cloud (PLY without faces) too.
+        std::fs::write(d.join("p.ply"), "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 2 1\n").unwrap();
+        let direct = load_scene_or_model(&d.join("p.ply")).unwrap();
+        assert_eq!(direct.point_clouds.len(), 1);
+        assert_eq!(direct.point_clouds[0].points, vec![Vec3::ZERO, Vec3::X, Vec3::new(0.0, 2.0, 1.0)]);
     }
 
     #[test]

@@ -404,3 +404,58 @@ fn asset_camera_paths_stay_inside_the_scene() {
         }
     }
 }
+
+/// A cube OBJ without normals (8 shared corners, 6 quads) and a scene using it as `model`.
+fn cube_obj_scene(object_extra: &str) -> (tempfile::TempDir, Result<hybrid_scene::Scene, hybrid_scene::SceneError>) {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut obj = String::new();
+    for i in 0..8 {
+        writeln!(obj, "v {} {} {}", i & 1, (i >> 1) & 1, (i >> 2) & 1).unwrap();
+    }
+    for q in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+        writeln!(obj, "f {} {} {} {}", q[0] + 1, q[1] + 1, q[2] + 1, q[3] + 1).unwrap();
+    }
+    std::fs::write(dir.path().join("cube.obj"), obj).unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, format!("[[object]]\nmodel = \"cube.obj\"\n{object_extra}")).unwrap();
+    let r = load_scene(&path);
+    (dir, r)
+}
+
+#[test]
+fn models_without_normals_get_smooth_normals_with_a_crease_angle() {
+    // Default 60°: the cube's 90° edges stay hard (each corner split into one vertex per face).
+    let (_d, s) = cube_obj_scene("");
+    let mesh = &s.expect("cube scene").objects[0].meshes[0];
+    assert_eq!((mesh.positions.len(), mesh.normals.len()), (24, 24));
+    for tri in &mesh.indices {
+        let n = tri.map(|i| mesh.normals[i as usize]);
+        assert!(n[0] == n[1] && n[1] == n[2] && n[0].abs().max_element() == 1.0, "flat axis-aligned face: {n:?}");
+    }
+    // 180°: every edge smooth, no vertex split, normals along the diagonals.
+    let (_d, s) = cube_obj_scene("crease_angle = 180\n");
+    let mesh = &s.expect("cube scene").objects[0].meshes[0];
+    assert_eq!(mesh.normals.len(), 8);
+    for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
+        assert!(n.dot((*p - glam::Vec3::splat(0.5)).normalize()) > 0.99999, "{p} {n}");
+    }
+}
+
+#[test]
+fn crease_angle_is_validated() {
+    for (value, what) in [("-1", "got -1"), ("180.5", "got 180.5"), ("nan", "NaN")] {
+        let (dir, r) = cube_obj_scene(&format!("crease_angle = {value}\n"));
+        let msg = r.expect_err("bad crease angle").to_string();
+        let file = dir.path().join("scene.toml");
+        assert!(msg.starts_with(&format!("{}:3:", file.display())), "{msg}");
+        assert!(msg.contains("crease_angle") && msg.contains(what), "{msg}");
+    }
+    let (_d, r) = cube_obj_scene("crease_angle = 0\n");
+    r.expect("0 is allowed");
+    expect_error(
+        &format!("{MATERIAL}[[object]]\nprimitive = \"sphere\"\nmaterial = \"white\"\ncrease_angle = 30\n"),
+        6,
+        &["`crease_angle` applies to `model` objects only"],
+    );
+    expect_error("[[object]]\nmodel = \"m.obj\"\ncrease_angle = \"soft\"\n", 3, &["invalid type"]);
+}

@@ -23,7 +23,7 @@ use glam::Vec3;
 use crate::{ColorSpace, Material, Mesh, SceneError, Texture};
 
 /// Lower-case extension of `path` (empty if none).
-fn extension(path: &Path) -> String {
+pub(crate) fn extension(path: &Path) -> String {
     path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
 }
 
