@@ -186,6 +186,14 @@ fn bad_input_exits_with_2_and_writes_nothing() {
     assert_bad_input(&["bench", d, "--out", o, "--path-seconds=-1"], &out, "--path-seconds");
     assert_bad_input(&["bench", d, "--out", o, "--modes", "rt-only", "--sweep-budget"], &out, "--sweep-budget");
     assert_bad_input(&["bench", "/nonexistent/scene.toml", "--out", o], &out, "/nonexistent/scene.toml");
+    // Issue 22: sizes and scenes above --max-memory are refused before anything is rendered.
+    assert_bad_input(
+        &["bench", d, "--out", o, "--backend", "cpu", "--size", "16384x16384", "--max-memory", "8GiB"],
+        &out,
+        "above the limit",
+    );
+    assert_bad_input(&["bench", d, "--out", o, "--backend", "cpu", "--size", "64x36", "--max-memory", "65MiB"], &out, "this render needs");
+    assert_bad_input(&["bench", d, "--out", o, "--max-memory", "4 parsecs"], &out, "--max-memory");
     // A scene without a camera path, asked for one.
     let no_path = dir.path().join("no-path.toml");
     let text = std::fs::read_to_string(&demo).unwrap();

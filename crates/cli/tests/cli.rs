@@ -218,3 +218,56 @@ fn inspect_prints_table_4_json_keys() {
     let plain = hybrid(&["inspect", scenes().join("demo.toml").to_str().unwrap()]);
     assert!(plain.status.success());
 }
+
+/// [`assert_bad_input`] with `args` as they are (no `--size` added).
+fn assert_bad_render(args: &[&str], needles: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let mut all = vec!["render", "--quiet", "-o", out.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let o = hybrid(&all);
+    assert_eq!(o.status.code(), Some(2), "args {all:?}: {}", stderr(&o));
+    let err = stderr(&o);
+    for n in needles {
+        assert!(err.contains(n), "message lacks `{n}`: {err}");
+    }
+    assert!(files_in(dir.path()).is_empty(), "bad input left files: {:?}", files_in(dir.path()));
+}
+
+/// Issue 22: a render estimated above `--max-memory` is refused before anything is allocated,
+/// rendered or written (the largest `--size` on the CPU used to abort with exit 134).
+#[test]
+fn renders_that_do_not_fit_the_memory_limit_exit_2_before_rendering() {
+    // 16384² × 160 bytes per pixel is 40 GiB for the frame alone.
+    let needles = ["frame alone needs about 40.06 GiB", "above the limit of 8.00 GiB (--max-memory)", "--max-memory 41GiB"];
+    assert_bad_render(&["--backend", "cpu", "--size", "16384x16384", "--max-memory", "8GiB"], &needles);
+    // Also with a dump folder to create: it is not left behind.
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("dump");
+    // (+ 32 bytes per pixel for writing the dump.)
+    let needles = ["frame alone needs about 48.06 GiB", "above the limit of 8.00 GiB (--max-memory)"];
+    assert_bad_render(&["--backend", "cpu", "--size", "16384x16384", "--max-memory", "8GiB", "--dump", dump.to_str().unwrap()], &needles);
+    assert!(!dump.exists(), "the dump folder was left behind");
+    // The whole estimate (scene and frame) against a limit the frame alone fits.
+    assert_bad_render(
+        &["--backend", "cpu", "--size", "64x36", "--max-memory", "65MiB"],
+        &["this render needs about", "scene", "--max-memory"],
+    );
+    // A scene whose data passes the limit is refused while it is parsed, at the object's line.
+    let scene = dir.path().join("spheres.toml");
+    // (Each 2048 × 2048 sphere is 384 MiB: the first fits, the second does not.)
+    let sphere = "[[object]]\nprimitive = \"sphere\"\nmaterial = \"m\"\nslices = 2048\nstacks = 2048\n";
+    std::fs::write(&scene, format!("[[material]]\nname = \"m\"\n\n{sphere}\n{sphere}")).unwrap();
+    assert_bad_render(
+        &[scene.to_str().unwrap(), "--backend", "cpu", "--max-memory", "512MiB"],
+        &["spheres.toml:11:", "sphere `sphere-2`", "--max-memory"],
+    );
+    // Bad values name the flag.
+    assert_bad_render(&["--max-memory", "lots"], &["--max-memory", "lots"]);
+    assert_bad_render(&["--max-memory", "0"], &["--max-memory"]);
+    // A limit that fits renders.
+    let out = dir.path().join("ok.png");
+    let o = hybrid(&["render", "--quiet", "--backend", "cpu", "--size", "64x36", "--max-memory", "1GiB", "-o", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(out.is_file());
+}

@@ -62,6 +62,22 @@ fn assert_matches(name: &str, mode: Mode, c: &Frame, g: &Frame, id_slack: f64, l
 }
 
 #[test]
+fn frame_targets_take_what_the_memory_estimate_counts() {
+    let ctx = context();
+    let targets = hybrid_gpu::targets::FrameTargets::new(&ctx.device, 1, 1);
+    let bytes: u64 = targets
+        .all()
+        .iter()
+        .map(|t| {
+            let format = t.texture.format();
+            let aspect = format.is_depth_stencil_format().then_some(wgpu::TextureAspect::DepthOnly);
+            u64::from(format.block_copy_size(aspect).expect("a copyable format"))
+        })
+        .sum();
+    assert_eq!(bytes, hybrid_core::memory::GPU_TARGET_BYTES_PER_PIXEL);
+}
+
+#[test]
 fn demo_scene_matches_the_cpu_in_every_mode() {
     let ctx = context();
     let scene = demo_scene();

@@ -12,8 +12,9 @@ use std::path::{Component, Path, PathBuf};
 use glam::Vec3;
 
 use crate::load::{MAX_MODEL_BYTES, check_file, load_model, load_point_cloud};
+use crate::memory::MemoryLimit;
 use crate::model::Aabb;
-use crate::{Scene, SceneError, load_scene, parse_scene};
+use crate::{Scene, SceneError, load_scene_within, parse_scene_within};
 
 /// What `render`, `bench` and `inspect` accept, for error messages.
 pub const ACCEPTED_INPUTS: &str = "a scene file (.toml) or a model file (.gltf, .glb, .obj, .ply; point clouds .ply, .las, .laz)";
@@ -77,15 +78,21 @@ fn ply_has_faces(path: &Path) -> Result<bool, SceneError> {
 /// The scene for `path`: a `.toml` scene file is loaded as it is; a model or point-cloud file gets
 /// the default scene of [`model_scene_toml`]. Any other file is an error that says what is accepted.
 pub fn load_scene_or_model(path: &Path) -> Result<Scene, SceneError> {
+    load_scene_or_model_within(path, &MemoryLimit::machine_default())
+}
+
+/// [`load_scene_or_model`] with the scene's data checked against `limit` as it is built
+/// ([`crate::load_scene_within`]).
+pub fn load_scene_or_model_within(path: &Path, limit: &MemoryLimit) -> Result<Scene, SceneError> {
     match input_kind(path)? {
-        InputKind::Scene => load_scene(path),
+        InputKind::Scene => load_scene_within(path, limit),
         _ => {
             // Paths in the scene are relative to a (virtual) scene file beside the model.
             let dir = path.parent().unwrap_or(Path::new(""));
             let stem = path.file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
             let virtual_file = dir.join(format!("{stem}.scene.toml"));
             let text = model_scene_toml(path, &virtual_file)?;
-            let mut scene = parse_scene(&text, &virtual_file)?;
+            let mut scene = parse_scene_within(&text, &virtual_file, limit)?;
             scene.source = Some(path.to_path_buf());
             Ok(scene)
         }

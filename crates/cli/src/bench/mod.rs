@@ -26,7 +26,7 @@ use std::path::Path;
 
 use hybrid_core::report::{FrameReport, StageTimings};
 use hybrid_core::{FrameSettings, Mode};
-use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene_or_model};
+use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene_or_model_within};
 use serde::Serialize;
 use serde_json::json;
 
@@ -34,7 +34,7 @@ use self::plot::{Chart, HLine, Series, write_chart};
 use crate::CliError;
 use crate::args::BenchArgs;
 use crate::output::{ensure_dir, write_bytes};
-use crate::render::{AnyRenderer, Backend, RenderOptions, choose_backend};
+use crate::render::{AnyRenderer, Backend, RenderOptions, check_memory, choose_backend, memory_limit};
 
 /// Warm-up frames rendered (and discarded) at the start of every pass.
 pub const WARMUP_FRAMES: usize = 2;
@@ -54,10 +54,14 @@ use self::stats::*;
 pub fn run(args: BenchArgs) -> Result<(), CliError> {
     check_args(&args)?;
     let name = args.scene.display().to_string();
-    let mut scene = load_scene_or_model(&args.scene)?;
+    let limit = memory_limit(args.max_memory);
+    // The images kept for FLIP are not known before the plan: the frame alone first.
+    hybrid_core::memory::frame_only(args.size.0, args.size.1, 0).check(&limit).map_err(CliError::bad_input)?;
+    let mut scene = load_scene_or_model_within(&args.scene, &limit)?;
     args.heuristic.apply(&mut scene.heuristic);
     let plan = plan(&args, &scene, &name)?;
     let backend = choose_backend(args.backend, args.quiet)?;
+    check_memory(&scene, &backend, args.size, plan.extra_bytes_per_pixel(args.flip_every), &limit)?;
     let backend_name = match &backend {
         Backend::Cpu => "cpu".to_string(),
         Backend::Gpu(ctx) => format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend),
