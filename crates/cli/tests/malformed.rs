@@ -82,6 +82,7 @@ fn expected(name: &str) -> &'static str {
         n if n.starts_with("gltf-") => "accessor",
         "ply-undercount.ply" => "face",
         "ply-coordinate-list.ply" => "list",
+        "ply-binary-trailing.ply" => "byte(s)",
         "obj-texture-index-0.obj" => "index 0",
         _ => "",
     }
