@@ -17,7 +17,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::CliError;
 use crate::args::{BackendChoice, CapsuleArgs, CapsuleVisibilityChoice, RenderArgs};
 use crate::dump::{DumpInput, write_all};
-use crate::output::{DumpDir, check_output_file, write_bytes, write_png_rgba8};
+use crate::output::{OutputDir, check_output_file, write_bytes, write_png_rgba8};
 
 /// Renders longer than this show a progress bar (unless `--quiet`).
 const PROGRESS_AFTER: Duration = Duration::from_secs(1);
@@ -27,9 +27,9 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     // is half-written.
     check_output_file(&args.output, "-o", &["png"])?;
     if let Some(r) = &args.report {
-        check_output_file(r, "--report", &[])?;
+        check_output_file(r, "--report", &["json"])?;
     }
-    let dump_dir = args.dump.as_deref().map(DumpDir::prepare).transpose()?;
+    let dump_dir = args.dump.as_deref().map(|d| OutputDir::prepare(d, "--dump")).transpose()?;
     if let Some(n) = args.threads {
         if n == 0 {
             return Err(CliError::bad_input("--threads must be at least 1"));

@@ -33,7 +33,7 @@ use serde_json::json;
 use self::plot::{Chart, HLine, Series, write_chart};
 use crate::CliError;
 use crate::args::BenchArgs;
-use crate::output::{ensure_dir, write_bytes};
+use crate::output::{OutputDir, write_bytes};
 use crate::render::{AnyRenderer, Backend, RenderOptions, check_memory, choose_backend, memory_limit};
 
 /// Warm-up frames rendered (and discarded) at the start of every pass.
@@ -66,8 +66,9 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         Backend::Cpu => "cpu".to_string(),
         Backend::Gpu(ctx) => format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend),
     };
-    // Everything is checked: now the output folder (created and probed before any rendering).
-    ensure_dir(&args.out)?;
+    // Everything is checked: now the output folder (created and probed before any rendering;
+    // removed again if the run fails, when this run created it).
+    let out_dir = OutputDir::prepare(&args.out, "--out")?;
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
     }
@@ -234,6 +235,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         write_bytes(&out.join("sweep.csv"), sweep_csv(&sweep).as_bytes())?;
         write_chart(&out.join("sweep.png"), &sweep_chart(&name, &sweep))?;
     }
+    out_dir.keep();
     print!(
         "{}",
         markdown(&name, &args, &machine, &static_summary, &path_summary, &sweep, scene.point_clouds.is_empty(), plan.path_seconds)
