@@ -15,6 +15,9 @@ pub(super) struct Bench {
     pub(super) quiet: bool,
     pub(super) backend: Backend,
     pub(super) options: RenderOptions,
+    /// One bar over every frame of the run (warm-ups included): set, mode, frame n of N, ETA.
+    /// Hidden with `--quiet` and when stderr is not a terminal.
+    pub(super) progress: ProgressBar,
 }
 
 impl Bench {
@@ -28,10 +31,17 @@ impl Bench {
         shots: &[Shot],
         keep: &dyn Fn(usize) -> bool,
     ) -> Result<Pass, CliError> {
-        if !self.quiet && set == "sweep" {
-            let policy = policy_name(scene.heuristic.policy);
-            eprint!("  budget {:?}, policy {policy}:", scene.heuristic.budget);
-        }
+        let what = if set == "sweep" {
+            let budget = match scene.heuristic.budget {
+                Budget::Unlimited => "unlimited".to_string(),
+                Budget::Cost(c) => format!("{c:.0}"),
+                Budget::Millis(ms) => format!("{ms} ms"),
+            };
+            format!("sweep {mode} (budget {budget}, policy {})", policy_name(scene.heuristic.policy))
+        } else {
+            format!("{set} {mode}")
+        };
+        self.progress.set_message(what.clone());
         let (width, height) = self.size;
         let settings = FrameSettings { width, height, mode };
         let mut renderer = AnyRenderer::new(&self.backend, scene, &self.scene_name, self.options)?;
@@ -39,6 +49,7 @@ impl Bench {
             for _ in 0..WARMUP_FRAMES {
                 let frame = renderer.render(&first.camera, settings, &mut |_| {})?;
                 renderer.recycle(frame);
+                self.progress.inc(1);
             }
         }
         let mut records = Vec::with_capacity(shots.len());
@@ -50,10 +61,12 @@ impl Bench {
                 images.insert(i, frame.buffers.final_srgb.iter().flat_map(|p| [p[0], p[1], p[2]]).collect());
             }
             renderer.recycle(frame);
+            self.progress.inc(1);
         }
         if !self.quiet {
             let m = mean(records.iter().map(|r| r.timings.frame)).unwrap_or(0.0);
-            eprintln!("  {set} {mode}: {} frames, mean {m:.1} ms", records.len());
+            // Above the bar (printed even where the bar is hidden).
+            self.progress.suspend(|| eprintln!("  {what}: {} frames, mean {m:.1} ms", records.len()));
         }
         Ok(Pass { records, images })
     }
