@@ -226,6 +226,20 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         "static": static_summary,
         "path": path_summary,
         "sweep": if args.sweep_budget { json!(sweep) } else { json!(null) },
+        // Passes of 100 frames or more: resident memory after frame 100 and at the end (soak).
+        "resident_memory": static_passes
+            .iter()
+            .map(|(m, p)| (format!("static {m}"), p.rss))
+            .chain(path_passes.iter().map(|(m, p)| (format!("path {m}"), p.rss)))
+            .filter_map(|(k, r)| r.map(|r| (k, json!({
+                    "frame_100_kib": r.frame_100_kib,
+                    "end_kib": r.end_kib,
+                    "frames": r.frames,
+                    "kept_bytes": r.kept_bytes,
+                    "growth": r.growth(),
+                    "growth_beyond_kept": r.growth_beyond_kept(),
+                }))))
+            .collect::<serde_json::Map<_, _>>(),
     });
 
     // Outputs (each written atomically).
