@@ -38,6 +38,13 @@ pub const DEMO_SCENE_TOML: &str = include_str!("../../../scenes/demo.toml");
 /// Largest accepted `trace.max_depth`.
 pub const MAX_TRACE_DEPTH: u32 = 64;
 
+/// Most secondary rays one ray tree may trace: the ray leaving the G-buffer surface and every
+/// reflection and refraction below it (issue 22). Depth alone does not bound the work: glass in
+/// a mirror box spawns two rays per hit, 2^depth of them. Children are admitted in the order
+/// both backends visit the tree (refraction subtree first), so the cut is the same on both; a
+/// child over the budget is untraced, as one below the importance cutoff (it contributes 0).
+pub const TRACE_RAY_BUDGET: u32 = 64;
+
 /// Loads and validates a scene file; relative paths inside are relative to the file. Its data
 /// must fit this machine's default memory limit ([`MemoryLimit::machine_default`]).
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {

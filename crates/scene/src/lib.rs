@@ -16,7 +16,9 @@ pub mod texture;
 
 pub use camera::{Camera, CameraPath, Keyframe, Projection};
 pub use error::SceneError;
-pub use file::{DEMO_SCENE_TOML, MAX_TRACE_DEPTH, demo_scene, load_scene, load_scene_within, parse_scene, parse_scene_within};
+pub use file::{
+    DEMO_SCENE_TOML, MAX_TRACE_DEPTH, TRACE_RAY_BUDGET, demo_scene, load_scene, load_scene_within, parse_scene, parse_scene_within,
+};
 pub use memory::{Bytes, MemoryLimit, parse_byte_size};
 pub use model::*;
 pub use model_scene::{ACCEPTED_INPUTS, InputKind, input_kind, load_scene_or_model, load_scene_or_model_within, model_scene_toml};
