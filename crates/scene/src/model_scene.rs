@@ -99,6 +99,9 @@ pub fn load_scene_or_model_within(path: &Path, limit: &MemoryLimit) -> Result<Sc
     }
 }
 
+/// Largest coordinate a bare model may have for its default scene to be computed in f32.
+const MAX_FRAMED_COORDINATE: f32 = 1e18;
+
 /// The default scene around the model or point cloud `model` as scene-file TOML, with the
 /// model's path written relative to the directory of `scene_file` (where the text will be saved).
 pub fn model_scene_toml(model: &Path, scene_file: &Path) -> Result<String, SceneError> {
@@ -124,6 +127,18 @@ pub fn model_scene_toml(model: &Path, scene_file: &Path) -> Result<String, Scene
     };
     if bounds.is_empty() {
         return Err(SceneError::new(model, "the model has no vertices, so there is nothing to frame"));
+    }
+    // The camera, far plane and ground are computed from the bounds (their diagonal squared
+    // included): far beyond 1e18 units they overflow to infinity.
+    let reach = bounds.min.abs().max(bounds.max.abs()).max_element();
+    if reach > MAX_FRAMED_COORDINATE {
+        return Err(SceneError::new(
+            model,
+            format!(
+                "the model reaches {reach:e} units from the origin, too far to frame in a default scene (at most {MAX_FRAMED_COORDINATE:e}); \
+                 write a scene file for it with its own camera"
+            ),
+        ));
     }
     let rel = relative_path(model, scene_file.parent().unwrap_or(Path::new("")));
     Ok(scene_text(&rel, kind, bounds))
@@ -242,6 +257,26 @@ fn scene_text(model: &str, kind: InputKind, b: Aabb) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn models_too_far_out_to_frame_are_refused_naming_the_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = |name: &str, x: f32| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, format!("v 0 0 0\nv {x} 0 0\nv 0 1 0\nf 1 2 3\n")).unwrap();
+            p
+        };
+        // 2^99: the diagonal's square overflowed and the camera was written at `[inf, inf, inf]`.
+        let far = obj("far.obj", 2f32.powi(99));
+        let e = model_scene_toml(&far, &dir.path().join("far.scene.toml")).unwrap_err();
+        assert!(e.to_string().contains("far.obj") && e.message.contains("too far to frame"), "{e}");
+        assert!(load_scene_or_model(&far).unwrap_err().message.contains("too far to frame"));
+        // At the limit it frames, with finite numbers throughout.
+        let edge = obj("edge.obj", 1e18);
+        let text = model_scene_toml(&edge, &dir.path().join("edge.scene.toml")).unwrap();
+        assert!(!text.contains("inf") && !text.contains("NaN"), "{text}");
+        assert!(load_scene_or_model(&edge).is_ok());
+    }
 
     #[test]
     fn relative_paths_walk_up_and_down() {
