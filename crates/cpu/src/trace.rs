@@ -13,7 +13,7 @@
 //!   luminance of the grey reflectivity colour, i.e. `r` (the luminance weights sum to 1), so
 //!   the child importance is `imp·r` (resp. `imp·τ`); the child is traced when that exceeds
 //!   `scene.trace.importance_cutoff` and the depth is below `scene.trace.max_depth` (capped at
-//!   [`MAX_TRACE_DEPTH`]), and gets depth + 1. Untraced children contribute 0.
+//!   [`MAX_TRACED_DEPTH`], the GPU's limit too), and gets depth + 1. Untraced children contribute 0.
 //! - Beyond the paper (issue 22): a ray tree (the ray leaving the G-buffer and everything below
 //!   it) traces at most [`TRACE_RAY_BUDGET`] rays. A node admits its reflection child, then its
 //!   refraction child, while the tree's count is below the budget; the refraction subtree is
@@ -63,7 +63,7 @@ pub struct TraceOutput {
 /// Recursion limit whatever `scene.trace.max_depth` says (the scene format's own limit, defined
 /// once in `hybrid_scene`), so a huge setting between two perfect mirrors cannot overflow a
 /// thread's stack.
-pub use hybrid_scene::{MAX_TRACE_DEPTH, TRACE_RAY_BUDGET};
+pub use hybrid_scene::{MAX_TRACE_DEPTH, MAX_TRACED_DEPTH, TRACE_RAY_BUDGET};
 
 /// Pixels per parallel work item (uneven ray cost: items are handed out one at a time).
 const CHUNK: usize = 64;
@@ -269,7 +269,7 @@ impl Tracer<'_, '_> {
             (None, None) => return sky(&scene.environment, &scene.textures, dir),
         };
         let settings = &scene.trace;
-        let max_depth = settings.max_depth.min(MAX_TRACE_DEPTH);
+        let max_depth = settings.max_depth.min(MAX_TRACED_DEPTH);
         let reflectivity = s.reflectivity;
         let transparency = 1.0 - s.opacity;
 

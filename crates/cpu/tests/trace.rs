@@ -320,7 +320,7 @@ fn facing_mirrors_stop_at_max_depth() {
         camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO),
     );
     let p = Surface { position: Vec3::ZERO, normal: Vec3::Z, opacity: 1.0, reflectivity: 1.0, ior: 1.5, ..Default::default() };
-    for (max_depth, rays) in [(1, 1), (5, 5), (1_000_000, hybrid_cpu::trace::MAX_TRACE_DEPTH as u64)] {
+    for (max_depth, rays) in [(1, 1), (5, 5), (1_000_000, hybrid_cpu::trace::MAX_TRACED_DEPTH as u64)] {
         s.trace.max_depth = max_depth;
         let out = run(&s, &one_pixel(&p));
         assert_eq!(out.rays.reflection, rays, "max depth {max_depth}");

@@ -38,6 +38,11 @@ pub const DEMO_SCENE_TOML: &str = include_str!("../../../scenes/demo.toml");
 /// Largest accepted `trace.max_depth`.
 pub const MAX_TRACE_DEPTH: u32 = 64;
 
+/// The deepest level either backend traces, whatever `trace.max_depth` says (above it the value
+/// is accepted and traced to this depth): the GPU's pending-ray stack holds 32 rays, and the CPU
+/// stops at the same depth so both give the same image (issue 22).
+pub const MAX_TRACED_DEPTH: u32 = 32;
+
 /// Most secondary rays one ray tree may trace: the ray leaving the G-buffer surface and every
 /// reflection and refraction below it (issue 22). Depth alone does not bound the work: glass in
 /// a mirror box spawns two rays per hit, 2^depth of them. Children are admitted in the order

@@ -17,7 +17,8 @@ pub mod texture;
 pub use camera::{Camera, CameraPath, Keyframe, Projection};
 pub use error::SceneError;
 pub use file::{
-    DEMO_SCENE_TOML, MAX_TRACE_DEPTH, TRACE_RAY_BUDGET, demo_scene, load_scene, load_scene_within, parse_scene, parse_scene_within,
+    DEMO_SCENE_TOML, MAX_TRACE_DEPTH, MAX_TRACED_DEPTH, TRACE_RAY_BUDGET, demo_scene, load_scene, load_scene_within, parse_scene,
+    parse_scene_within,
 };
 pub use memory::{Bytes, MemoryLimit, parse_byte_size};
 pub use model::*;
