@@ -271,3 +271,48 @@ fn renders_that_do_not_fit_the_memory_limit_exit_2_before_rendering() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(out.is_file());
 }
+
+/// Issue 22: a scene at every documented maximum at once — `max_depth` 64, 8 directional, 32
+/// point and 32 spot lights, glass in a mirror box — renders (the ray budget bounds each pixel's
+/// work), and the same scene with a sphere at the maximum tessellation is refused up front under
+/// a memory limit it does not fit, naming the limit.
+#[test]
+fn a_scene_at_the_documented_maxima_renders_or_is_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "[camera]\nposition = [0.0, 0.0, 1.5]\ntarget = [0.0, 0.0, 0.0]\n\n[trace]\nmax_depth = 64\nimportance_cutoff = 0.0\n\n\
+         [[material]]\nname = \"mirror\"\nreflectivity = 0.98\n\n\
+         [[material]]\nname = \"glass\"\nreflectivity = 0.9\nopacity = 0.02\nior = 1.5\n\n\
+         [[object]]\nprimitive = \"cube\"\nmaterial = \"mirror\"\nscale = [-4.0, -4.0, -4.0]\n\n",
+    );
+    for i in 0..8 {
+        text += &format!("[[light]]\ntype = \"directional\"\ndirection = [{}, -1.0, -0.5]\nintensity = 0.1\n\n", i as f32 * 0.1 - 0.4);
+    }
+    for i in 0..32 {
+        let x = (i % 8) as f32 * 0.4 - 1.4;
+        text += &format!("[[light]]\ntype = \"point\"\nposition = [{x}, 1.5, {}]\nintensity = 0.05\n\n", (i / 8) as f32 * 0.5 - 1.0);
+        text += &format!("[[light]]\ntype = \"spot\"\nposition = [{x}, -1.5, 1.0]\ndirection = [0.0, 1.0, -0.5]\nintensity = 0.05\n\n");
+    }
+    let sphere = |seg: u32| format!("[[object]]\nprimitive = \"sphere\"\nmaterial = \"glass\"\nslices = {seg}\nstacks = {seg}\n");
+    let scene = dir.path().join("maxima.toml");
+    std::fs::write(&scene, format!("{text}{}", sphere(32))).unwrap();
+    let out = dir.path().join("maxima.png");
+    let o = hybrid(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--quiet",
+        "--backend",
+        "cpu",
+        "--size",
+        "32x18",
+        "--mode",
+        "rt-only",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(out.is_file());
+    // At the maximum tessellation (4096 × 4096: 33.5M triangles, 1.5 GiB of scene data).
+    std::fs::write(&scene, format!("{text}{}", sphere(4096))).unwrap();
+    assert_bad_render(&[scene.to_str().unwrap(), "--backend", "cpu", "--max-memory", "1GiB"], &["maxima.toml", "sphere-2", "--max-memory"]);
+}
