@@ -235,7 +235,7 @@ fn assert_bad_render(args: &[&str], needles: &[&str]) {
 }
 
 /// Issue 22: a render estimated above `--max-memory` is refused before anything is allocated,
-/// rendered or written (the largest `--size` on the CPU used to abort with exit 134).
+/// rendered or written (issue 22: very large `--size` values on the CPU aborted with exit 134).
 #[test]
 fn renders_that_do_not_fit_the_memory_limit_exit_2_before_rendering() {
     // 16384² × 160 bytes per pixel is 40 GiB for the frame alone.
