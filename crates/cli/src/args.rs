@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use hybrid_core::Mode;
-use hybrid_scene::{Budget, HeuristicSettings, Policy};
+use hybrid_scene::{Budget, HeuristicSettings, Policy, parse_byte_size};
 
 use crate::CliError;
 
@@ -140,6 +140,11 @@ pub struct RenderArgs {
     /// cores adds scheduling overhead without speed; fewer leaves cores idle.
     #[arg(long, value_parser = parse_threads)]
     pub threads: Option<usize>,
+    /// Memory this run may plan to use, e.g. `4GiB`, `512MiB`, `1.5GiB` (B, KiB, MiB, GiB, TiB;
+    /// kB, MB, GB, TB). A size or scene estimated to need more is refused before anything is
+    /// rendered or written (exit 2). Default: 75% of the machine's memory.
+    #[arg(long, value_name = "SIZE", value_parser = parse_byte_size)]
+    pub max_memory: Option<u64>,
     #[command(flatten)]
     pub capsule: CapsuleArgs,
     /// Print nothing on success: no progress bar, no backend line and no result line (the
@@ -194,6 +199,11 @@ pub struct BenchArgs {
     /// cores adds scheduling overhead without speed; fewer leaves cores idle.
     #[arg(long, value_parser = parse_threads)]
     pub threads: Option<usize>,
+    /// Memory this run may plan to use, e.g. `4GiB`, `512MiB`, `1.5GiB` (B, KiB, MiB, GiB, TiB;
+    /// kB, MB, GB, TB). A size or scene estimated to need more is refused before anything is
+    /// rendered or written (exit 2). Default: 75% of the machine's memory.
+    #[arg(long, value_name = "SIZE", value_parser = parse_byte_size)]
+    pub max_memory: Option<u64>,
     #[command(flatten)]
     pub capsule: CapsuleArgs,
     /// No progress lines and no backend line on stderr; the tables are still printed on stdout

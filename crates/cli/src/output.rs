@@ -120,36 +120,43 @@ pub fn check_output_file(file: &Path, flag: &str, extensions: &[&str]) -> Result
     ensure_parent(file)
 }
 
-/// A `--dump` folder prepared before rendering: created (and probed) now, removed again on drop
-/// unless [`DumpDir::keep`] is called, when this run created it, so a failing render leaves no
-/// empty or half-filled folder behind.
-pub struct DumpDir {
-    path: PathBuf,
-    created: bool,
+/// An output folder (`--dump`, `bench --out`) prepared before rendering: created (and probed)
+/// now, and removed again on drop unless [`OutputDir::keep`] is called — from the outermost
+/// folder this run created, so a failing run leaves neither an empty or half-filled folder nor
+/// the new folders above it (`--out new/sub` removes `new`). A folder that existed is never
+/// removed.
+pub struct OutputDir {
+    /// The outermost folder this run created, if any.
+    created: Option<PathBuf>,
     keep: bool,
 }
 
-impl DumpDir {
-    pub fn prepare(dir: &Path) -> Result<Self, CliError> {
+impl OutputDir {
+    /// `dir` for `flag` (named in errors).
+    pub fn prepare(dir: &Path, flag: &str) -> Result<Self, CliError> {
         if dir.exists() && !dir.is_dir() {
-            return Err(CliError::bad_input(format!("{}: --dump names a file; give a folder", dir.display())));
+            return Err(CliError::bad_input(format!("{}: {flag} names a file; give a folder", dir.display())));
         }
-        let created = !dir.exists();
+        // The outermost missing ancestor (or `dir` itself) is what this run creates.
+        let created = dir.ancestors().take_while(|a| !a.as_os_str().is_empty() && !a.exists()).last().map(Path::to_path_buf);
         // Remove what we create if the checks below fail.
-        let guard = Self { path: dir.to_path_buf(), created, keep: false };
+        let guard = Self { created, keep: false };
         ensure_dir(dir)?;
         Ok(guard)
     }
-    /// The render succeeded: keep the folder.
+
+    /// The run succeeded: keep the folder.
     pub fn keep(mut self) {
         self.keep = true;
     }
 }
 
-impl Drop for DumpDir {
+impl Drop for OutputDir {
     fn drop(&mut self) {
-        if self.created && !self.keep {
-            let _ = fs::remove_dir_all(&self.path);
+        if let Some(created) = &self.created
+            && !self.keep
+        {
+            let _ = fs::remove_dir_all(created);
         }
     }
 }
@@ -166,19 +173,35 @@ mod tests {
         let e = check_output_file(&dir.path().join("x.jpg"), "-o", &["png"]).unwrap_err();
         assert!(e.message.contains("`.jpg`") && e.message.contains(".png"), "{}", e.message);
         assert!(check_output_file(&dir.path().join("x.PNG"), "-o", &["png"]).is_ok());
-        assert!(check_output_file(&dir.path().join("r"), "--report", &[]).is_ok());
+        assert!(check_output_file(&dir.path().join("r.json"), "--report", &["json"]).is_ok());
+        let e = check_output_file(&dir.path().join("r.txt"), "--report", &["json"]).unwrap_err();
+        assert!(e.message.contains("--report has `.txt`, but only .json is written"), "{}", e.message);
     }
 
     #[test]
-    fn dump_dir_created_by_a_failed_run_is_removed() {
+    fn output_dir_created_by_a_failed_run_is_removed() {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path().join("new");
-        drop(DumpDir::prepare(&d).unwrap());
+        drop(OutputDir::prepare(&d, "--dump").unwrap());
         assert!(!d.exists());
-        DumpDir::prepare(&d).unwrap().keep();
+        OutputDir::prepare(&d, "--dump").unwrap().keep();
         assert!(d.is_dir());
-        // An existing folder is never removed.
-        drop(DumpDir::prepare(&d).unwrap());
-        assert!(d.is_dir());
+        // An existing folder is never removed, nor what it held.
+        std::fs::write(d.join("old.png"), b"x").unwrap();
+        drop(OutputDir::prepare(&d, "--dump").unwrap());
+        assert!(d.join("old.png").is_file());
+        // New folders above the output folder go too, up to the first that existed.
+        let nested = d.join("a/b/c");
+        let guard = OutputDir::prepare(&nested, "--out").unwrap();
+        assert!(nested.is_dir());
+        std::fs::write(nested.join("bench.json"), b"{}").unwrap();
+        drop(guard);
+        assert!(!d.join("a").exists());
+        assert!(d.join("old.png").is_file());
+        // A relative path in the current folder.
+        assert_eq!(OutputDir::prepare(Path::new("."), "--out").unwrap().created, None);
+        // A file is not a folder.
+        let e = OutputDir::prepare(&d.join("old.png"), "--out").err().unwrap();
+        assert!(e.message.contains("--out names a file"), "{}", e.message);
     }
 }

@@ -3,17 +3,20 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use hybrid_core::memory;
 use hybrid_core::{Frame, FrameSettings, Mode, Stage};
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
 use hybrid_gpu::{AdapterChoice, GpuContext, GpuError};
-use hybrid_scene::{Camera, DEMO_SCENE_TOML, InputKind, Scene, demo_scene, input_kind, load_scene_or_model, model_scene_toml};
+use hybrid_scene::{
+    Camera, DEMO_SCENE_TOML, InputKind, MemoryLimit, Scene, demo_scene, input_kind, load_scene_or_model_within, model_scene_toml,
+};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
 use crate::args::{BackendChoice, CapsuleArgs, CapsuleVisibilityChoice, RenderArgs};
 use crate::dump::{DumpInput, write_all};
-use crate::output::{DumpDir, check_output_file, write_bytes, write_png_rgba8};
+use crate::output::{OutputDir, check_output_file, write_bytes, write_png_rgba8};
 
 /// Renders longer than this show a progress bar (unless `--quiet`).
 const PROGRESS_AFTER: Duration = Duration::from_secs(1);
@@ -23,9 +26,9 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     // is half-written.
     check_output_file(&args.output, "-o", &["png"])?;
     if let Some(r) = &args.report {
-        check_output_file(r, "--report", &[])?;
+        check_output_file(r, "--report", &["json"])?;
     }
-    let dump_dir = args.dump.as_deref().map(DumpDir::prepare).transpose()?;
+    let dump_dir = args.dump.as_deref().map(|d| OutputDir::prepare(d, "--dump")).transpose()?;
     if let Some(n) = args.threads {
         if n == 0 {
             return Err(CliError::bad_input("--threads must be at least 1"));
@@ -33,13 +36,15 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
     }
     args.heuristic.check()?;
+    // Memory: a size that cannot fit whatever the scene is refused before the scene is loaded;
+    // the scene's data is checked as it is built, the whole render once the backend is known.
+    let limit = memory_limit(args.max_memory);
+    let extra_per_pixel = if args.dump.is_some() { memory::DUMP_BYTES_PER_PIXEL } else { 0 };
+    memory::frame_only(args.size.0, args.size.1, extra_per_pixel).check(&limit).map_err(CliError::bad_input)?;
     let mut scene: Scene = match &args.scene {
-        Some(path) => load_scene_or_model(path)?,
+        Some(path) => load_scene_or_model_within(path, &limit)?,
         None => demo_scene(),
     };
-    if let Some(out) = &args.save_scene {
-        save_scene(args.scene.as_deref(), out)?;
-    }
     args.heuristic.apply(&mut scene.heuristic);
     let camera = match args.time {
         None => scene.camera,
@@ -66,10 +71,24 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     let settings = FrameSettings { width, height, mode: args.mode };
 
     let start = Instant::now();
+    let backend = choose_backend(args.backend, args.quiet)?;
+    let backend = match check_memory(&scene, &backend, args.size, extra_per_pixel, &limit) {
+        // `--backend auto`: what does not fit beside the GPU backend may fit the CPU backend.
+        Err(e) if matches!(args.backend, BackendChoice::Auto) && matches!(backend, Backend::Gpu(_)) => {
+            check_memory(&scene, &Backend::Cpu, args.size, extra_per_pixel, &limit)?;
+            if !args.quiet {
+                eprintln!("backend: cpu (auto: {})", e.message);
+            }
+            Backend::Cpu
+        }
+        other => other.map(|()| backend)?,
+    };
+    if let Some(out) = &args.save_scene {
+        save_scene(args.scene.as_deref(), out)?;
+    }
     let progress = Progress::new(args.quiet, start);
     progress.stage("prepare");
     let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
-    let backend = choose_backend(args.backend, args.quiet)?;
     let options = RenderOptions::from(&args.capsule);
     let mut renderer = match AnyRenderer::new(&backend, &scene, &file, options) {
         // `--backend auto`: a GPU that refuses the scene (too large, out of memory) is not the
@@ -78,6 +97,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
             if !args.quiet {
                 eprintln!("backend: cpu (auto: the GPU refused the scene: {})", e.message);
             }
+            check_memory(&scene, &Backend::Cpu, args.size, extra_per_pixel, &limit)?;
             AnyRenderer::new(&Backend::Cpu, &scene, &file, options)?
         }
         other => other?,
@@ -123,6 +143,21 @@ pub fn stage_label(stage: Stage, mode: Mode) -> &'static str {
         (Stage::Raster, Mode::RtOnly) => "primary rays",
         _ => stage.name(),
     }
+}
+
+/// `--max-memory`, or the machine's default limit.
+pub fn memory_limit(flag: Option<u64>) -> MemoryLimit {
+    flag.map_or_else(MemoryLimit::machine_default, MemoryLimit::explicit)
+}
+
+/// Refuses (exit 2) rendering `scene` at `size` on `backend` when the estimate
+/// (`hybrid_core::memory::estimate`, with `extra_per_pixel` beyond the frame) is above `limit`.
+pub fn check_memory(scene: &Scene, backend: &Backend, size: (u32, u32), extra_per_pixel: u64, limit: &MemoryLimit) -> Result<(), CliError> {
+    let kind = match backend {
+        Backend::Cpu => memory::Backend::Cpu,
+        Backend::Gpu(_) => memory::Backend::Gpu,
+    };
+    memory::estimate(scene, kind, size.0, size.1, extra_per_pixel).check(limit).map_err(CliError::bad_input)
 }
 
 /// Beyond-the-paper switches both backends take.

@@ -186,6 +186,14 @@ fn bad_input_exits_with_2_and_writes_nothing() {
     assert_bad_input(&["bench", d, "--out", o, "--path-seconds=-1"], &out, "--path-seconds");
     assert_bad_input(&["bench", d, "--out", o, "--modes", "rt-only", "--sweep-budget"], &out, "--sweep-budget");
     assert_bad_input(&["bench", "/nonexistent/scene.toml", "--out", o], &out, "/nonexistent/scene.toml");
+    // Issue 22: sizes and scenes above --max-memory are refused before anything is rendered.
+    assert_bad_input(
+        &["bench", d, "--out", o, "--backend", "cpu", "--size", "16384x16384", "--max-memory", "8GiB"],
+        &out,
+        "above the limit",
+    );
+    assert_bad_input(&["bench", d, "--out", o, "--backend", "cpu", "--size", "64x36", "--max-memory", "65MiB"], &out, "this render needs");
+    assert_bad_input(&["bench", d, "--out", o, "--max-memory", "4 parsecs"], &out, "--max-memory");
     // A scene without a camera path, asked for one.
     let no_path = dir.path().join("no-path.toml");
     let text = std::fs::read_to_string(&demo).unwrap();
@@ -200,4 +208,26 @@ fn bad_input_exits_with_2_and_writes_nothing() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("cannot create output folder"), "{}", stderr(&o));
     assert!(!out.exists());
+}
+
+/// `--out NEW/sub`: a run that fails leaves neither folder behind (the folders a run creates are
+/// removed again unless it succeeds, as `render --dump` does); one that succeeds keeps both.
+#[test]
+fn a_failing_bench_leaves_no_new_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let top = dir.path().join("new");
+    let nested = top.join("sub");
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "[[object]]\nmodel = \"missing.ply\"\n").unwrap();
+    for args in [
+        vec!["bench", bad.to_str().unwrap(), "--quiet", "--out", nested.to_str().unwrap(), "--size", "8x8", "--frames", "1"],
+        vec!["bench", "/nonexistent.toml", "--quiet", "--out", nested.to_str().unwrap()],
+    ] {
+        let o = hybrid(&args);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(!top.exists(), "{args:?} left {}", top.display());
+    }
+    let o = tiny_bench(&nested, &["--modes", "raster"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(nested.join("bench.json").is_file());
 }

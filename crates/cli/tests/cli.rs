@@ -296,3 +296,101 @@ fn bench_help_explains_its_terms() {
     let bench = top.lines().find(|l| l.trim_start().starts_with("bench")).expect("bench in hybrid --help");
     assert!(bench.contains("Tables 5 and 6") && !top.contains("Terms:"), "{top}");
 }
+
+/// [`assert_bad_input`] with `args` as they are (no `--size` added).
+fn assert_bad_render(args: &[&str], needles: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let mut all = vec!["render", "--quiet", "-o", out.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let o = hybrid(&all);
+    assert_eq!(o.status.code(), Some(2), "args {all:?}: {}", stderr(&o));
+    let err = stderr(&o);
+    for n in needles {
+        assert!(err.contains(n), "message lacks `{n}`: {err}");
+    }
+    assert!(files_in(dir.path()).is_empty(), "bad input left files: {:?}", files_in(dir.path()));
+}
+
+/// Issue 22: a render estimated above `--max-memory` is refused before anything is allocated,
+/// rendered or written (issue 22: very large `--size` values on the CPU aborted with exit 134).
+#[test]
+fn renders_that_do_not_fit_the_memory_limit_exit_2_before_rendering() {
+    // 16384² × 160 bytes per pixel is 40 GiB for the frame alone.
+    let needles = ["frame alone needs about 40.06 GiB", "above the limit of 8.00 GiB (--max-memory)", "--max-memory 41GiB"];
+    assert_bad_render(&["--backend", "cpu", "--size", "16384x16384", "--max-memory", "8GiB"], &needles);
+    // Also with a dump folder to create: it is not left behind.
+    let dir = tempfile::tempdir().unwrap();
+    let dump = dir.path().join("dump");
+    // (+ 32 bytes per pixel for writing the dump.)
+    let needles = ["frame alone needs about 48.06 GiB", "above the limit of 8.00 GiB (--max-memory)"];
+    assert_bad_render(&["--backend", "cpu", "--size", "16384x16384", "--max-memory", "8GiB", "--dump", dump.to_str().unwrap()], &needles);
+    assert!(!dump.exists(), "the dump folder was left behind");
+    // The whole estimate (scene and frame) against a limit the frame alone fits.
+    assert_bad_render(
+        &["--backend", "cpu", "--size", "64x36", "--max-memory", "65MiB"],
+        &["this render needs about", "scene", "--max-memory"],
+    );
+    // A scene whose data passes the limit is refused while it is parsed, at the object's line.
+    let scene = dir.path().join("spheres.toml");
+    // (Each 2048 × 2048 sphere is 384 MiB: the first fits, the second does not.)
+    let sphere = "[[object]]\nprimitive = \"sphere\"\nmaterial = \"m\"\nslices = 2048\nstacks = 2048\n";
+    std::fs::write(&scene, format!("[[material]]\nname = \"m\"\n\n{sphere}\n{sphere}")).unwrap();
+    assert_bad_render(
+        &[scene.to_str().unwrap(), "--backend", "cpu", "--max-memory", "512MiB"],
+        &["spheres.toml:11:", "sphere `sphere-2`", "--max-memory"],
+    );
+    // Bad values name the flag.
+    assert_bad_render(&["--max-memory", "lots"], &["--max-memory", "lots"]);
+    assert_bad_render(&["--max-memory", "0"], &["--max-memory"]);
+    // A limit that fits renders.
+    let out = dir.path().join("ok.png");
+    let o = hybrid(&["render", "--quiet", "--backend", "cpu", "--size", "64x36", "--max-memory", "1GiB", "-o", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(out.is_file());
+}
+
+/// Issue 22: a scene at every documented maximum at once — `max_depth` 64, 8 directional, 32
+/// point and 32 spot lights, glass in a mirror box — renders (the ray budget bounds each pixel's
+/// work), and the same scene with a sphere at the maximum tessellation is refused up front under
+/// a memory limit it does not fit, naming the limit.
+#[test]
+fn a_scene_at_the_documented_maxima_renders_or_is_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from(
+        "[camera]\nposition = [0.0, 0.0, 1.5]\ntarget = [0.0, 0.0, 0.0]\n\n[trace]\nmax_depth = 64\nimportance_cutoff = 0.0\n\n\
+         [[material]]\nname = \"mirror\"\nreflectivity = 0.98\n\n\
+         [[material]]\nname = \"glass\"\nreflectivity = 0.9\nopacity = 0.02\nior = 1.5\n\n\
+         [[object]]\nprimitive = \"cube\"\nmaterial = \"mirror\"\nscale = [-4.0, -4.0, -4.0]\n\n",
+    );
+    for i in 0..8 {
+        text += &format!("[[light]]\ntype = \"directional\"\ndirection = [{}, -1.0, -0.5]\nintensity = 0.1\n\n", i as f32 * 0.1 - 0.4);
+    }
+    for i in 0..32 {
+        let x = (i % 8) as f32 * 0.4 - 1.4;
+        text += &format!("[[light]]\ntype = \"point\"\nposition = [{x}, 1.5, {}]\nintensity = 0.05\n\n", (i / 8) as f32 * 0.5 - 1.0);
+        text += &format!("[[light]]\ntype = \"spot\"\nposition = [{x}, -1.5, 1.0]\ndirection = [0.0, 1.0, -0.5]\nintensity = 0.05\n\n");
+    }
+    let sphere = |seg: u32| format!("[[object]]\nprimitive = \"sphere\"\nmaterial = \"glass\"\nslices = {seg}\nstacks = {seg}\n");
+    let scene = dir.path().join("maxima.toml");
+    std::fs::write(&scene, format!("{text}{}", sphere(32))).unwrap();
+    let out = dir.path().join("maxima.png");
+    let o = hybrid(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--quiet",
+        "--backend",
+        "cpu",
+        "--size",
+        "32x18",
+        "--mode",
+        "rt-only",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(out.is_file());
+    // At the maximum tessellation (4096 × 4096: 33.5M triangles, 1.5 GiB of scene data).
+    std::fs::write(&scene, format!("{text}{}", sphere(4096))).unwrap();
+    assert_bad_render(&[scene.to_str().unwrap(), "--backend", "cpu", "--max-memory", "1GiB"], &["maxima.toml", "sphere-2", "--max-memory"]);
+}

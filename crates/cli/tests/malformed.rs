@@ -82,6 +82,7 @@ fn expected(name: &str) -> &'static str {
         n if n.starts_with("gltf-") => "accessor",
         "ply-undercount.ply" => "face",
         "ply-coordinate-list.ply" => "list",
+        "ply-binary-trailing.ply" => "byte(s)",
         "obj-texture-index-0.obj" => "index 0",
         _ => "",
     }
@@ -171,6 +172,17 @@ fn output_paths_are_checked_before_rendering() {
     let (code, err) = run(&["render", bad.to_str().unwrap(), "--quiet", "--size", "8x8", "-o", o, "--dump", newdir.to_str().unwrap()]);
     assert_eq!(code, Some(2), "{err}");
     assert!(!newdir.exists());
+    // Nor the new folders above it (`--dump NEWDIR/sub/dump`).
+    let nested = newdir.join("sub/dump");
+    let (code, err) = run(&["render", bad.to_str().unwrap(), "--quiet", "--size", "8x8", "-o", o, "--dump", nested.to_str().unwrap()]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(!newdir.exists(), "left {}", newdir.display());
+    // --report is JSON: another extension is refused before rendering.
+    let report = dir.path().join("report.txt");
+    let (code, err) = run(&["render", "--quiet", "--size", "8x8", "-o", o, "--report", report.to_str().unwrap()]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--report has `.txt`, but only .json is written"), "{err}");
+    assert!(!out.exists() && !report.exists());
 }
 
 #[test]

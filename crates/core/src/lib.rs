@@ -9,6 +9,7 @@ pub mod buffers;
 pub mod depth_merge;
 pub mod frame;
 pub mod lanes;
+pub mod memory;
 pub mod point_colors;
 pub mod prepare;
 pub mod report;

@@ -13,7 +13,13 @@
 //!   luminance of the grey reflectivity colour, i.e. `r` (the luminance weights sum to 1), so
 //!   the child importance is `imp·r` (resp. `imp·τ`); the child is traced when that exceeds
 //!   `scene.trace.importance_cutoff` and the depth is below `scene.trace.max_depth` (capped at
-//!   [`MAX_TRACE_DEPTH`]), and gets depth + 1. Untraced children contribute 0.
+//!   [`MAX_TRACED_DEPTH`], the GPU's limit too), and gets depth + 1. Untraced children contribute 0.
+//! - Beyond the paper (issue 22): a ray tree (the ray leaving the G-buffer and everything below
+//!   it) traces at most [`TRACE_RAY_BUDGET`] rays. A node admits its reflection child, then its
+//!   refraction child, while the tree's count is below the budget; the refraction subtree is
+//!   traced before the reflection subtree, which is the order the GPU's stack pops them, so both
+//!   backends cut the same children. A child over the budget contributes 0, as one below the
+//!   cutoff.
 //! - Local lighting (listing 5, unshadowed) is computed unless `r ≥ 1` or `τ ≥ 1`; at
 //!   depth ≥ max depth both children are replaced by it; the result is
 //!   `combine(lighting, refl, refr, r, τ)` (the eq. 5/6 average, = color1/color2 of 8c).
@@ -57,7 +63,7 @@ pub struct TraceOutput {
 /// Recursion limit whatever `scene.trace.max_depth` says (the scene format's own limit, defined
 /// once in `hybrid_scene`), so a huge setting between two perfect mirrors cannot overflow a
 /// thread's stack.
-pub use hybrid_scene::MAX_TRACE_DEPTH;
+pub use hybrid_scene::{MAX_TRACE_DEPTH, MAX_TRACED_DEPTH, TRACE_RAY_BUDGET};
 
 /// Pixels per parallel work item (uneven ray cost: items are handed out one at a time).
 const CHUNK: usize = 64;
@@ -204,7 +210,7 @@ impl Tracer<'_, '_> {
     fn reflection_ray(&self, s: &Surface, incident: Vec3, rays: &mut RayCounts) -> Vec3 {
         if s.reflectivity > 0.0 {
             let dir = reflect(incident, s.normal).normalize_or_zero();
-            self.secondary(self.offset(s, dir), dir, s.reflectivity, 1, Kind::Reflection, rays)
+            self.secondary(self.offset(s, dir), dir, s.reflectivity, 1, Kind::Reflection, &mut 1, rays)
         } else {
             Vec3::ZERO
         }
@@ -216,7 +222,7 @@ impl Tracer<'_, '_> {
     fn refraction_ray(&self, s: &Surface, incident: Vec3, rays: &mut RayCounts) -> Vec3 {
         if s.opacity < 1.0 {
             let (dir, _tir) = refract_or_reflect(incident, s.normal, self.prepared.scene.environment.ior, s.ior);
-            self.secondary(self.offset(s, dir), dir, 1.0 - s.opacity, 1, Kind::Refraction, rays)
+            self.secondary(self.offset(s, dir), dir, 1.0 - s.opacity, 1, Kind::Refraction, &mut 1, rays)
         } else {
             Vec3::ZERO
         }
@@ -237,7 +243,19 @@ impl Tracer<'_, '_> {
     }
 
     /// Traces a secondary ray: closest hit shaded with listing 8c, miss = skybox (listing 8d).
-    fn secondary(&self, origin: Vec3, dir: Vec3, importance: f32, depth: u32, kind: Kind, rays: &mut RayCounts) -> Vec3 {
+    /// `admitted` counts the rays of this ray tree admitted so far (this one included), against
+    /// [`TRACE_RAY_BUDGET`].
+    #[allow(clippy::too_many_arguments)]
+    fn secondary(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        importance: f32,
+        depth: u32,
+        kind: Kind,
+        admitted: &mut u32,
+        rays: &mut RayCounts,
+    ) -> Vec3 {
         match kind {
             Kind::Reflection => rays.reflection += 1,
             Kind::Refraction => rays.refraction += 1,
@@ -251,21 +269,29 @@ impl Tracer<'_, '_> {
             (None, None) => return sky(&scene.environment, &scene.textures, dir),
         };
         let settings = &scene.trace;
-        let max_depth = settings.max_depth.min(MAX_TRACE_DEPTH);
+        let max_depth = settings.max_depth.min(MAX_TRACED_DEPTH);
         let reflectivity = s.reflectivity;
         let transparency = 1.0 - s.opacity;
 
-        let mut refl = Vec3::ZERO;
+        // Admission: reflection child, then refraction child, while the tree is under budget.
+        let mut admit = |imp: f32| {
+            let ok = imp > settings.importance_cutoff && depth < max_depth && *admitted < TRACE_RAY_BUDGET;
+            *admitted += u32::from(ok);
+            ok
+        };
         let refl_imp = importance * reflectivity;
-        if refl_imp > settings.importance_cutoff && depth < max_depth {
-            let d = reflect(dir, s.normal).normalize_or_zero();
-            refl = self.secondary(self.offset(&s, d), d, refl_imp, depth + 1, Kind::Reflection, rays);
-        }
-        let mut refr = Vec3::ZERO;
         let refr_imp = importance * transparency;
-        if refr_imp > settings.importance_cutoff && depth < max_depth {
+        let (trace_refl, trace_refr) = (admit(refl_imp), admit(refr_imp));
+        // The refraction subtree first (the GPU's pop order), then the reflection subtree.
+        let mut refr = Vec3::ZERO;
+        if trace_refr {
             let (d, _tir) = refract_or_reflect(dir, s.normal, scene.environment.ior, s.ior);
-            refr = self.secondary(self.offset(&s, d), d, refr_imp, depth + 1, Kind::Refraction, rays);
+            refr = self.secondary(self.offset(&s, d), d, refr_imp, depth + 1, Kind::Refraction, admitted, rays);
+        }
+        let mut refl = Vec3::ZERO;
+        if trace_refl {
+            let d = reflect(dir, s.normal).normalize_or_zero();
+            refl = self.secondary(self.offset(&s, d), d, refl_imp, depth + 1, Kind::Reflection, admitted, rays);
         }
         let lighting = if reflectivity < 1.0 && transparency < 1.0 { self.frame_lights.local_lighting(&s, -dir) } else { Vec3::ZERO };
         if depth >= max_depth {

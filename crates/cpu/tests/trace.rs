@@ -320,7 +320,7 @@ fn facing_mirrors_stop_at_max_depth() {
         camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO),
     );
     let p = Surface { position: Vec3::ZERO, normal: Vec3::Z, opacity: 1.0, reflectivity: 1.0, ior: 1.5, ..Default::default() };
-    for (max_depth, rays) in [(1, 1), (5, 5), (1_000_000, hybrid_cpu::trace::MAX_TRACE_DEPTH as u64)] {
+    for (max_depth, rays) in [(1, 1), (5, 5), (1_000_000, hybrid_cpu::trace::MAX_TRACED_DEPTH as u64)] {
         s.trace.max_depth = max_depth;
         let out = run(&s, &one_pixel(&p));
         assert_eq!(out.rays.reflection, rays, "max depth {max_depth}");
@@ -334,4 +334,28 @@ fn facing_mirrors_stop_at_max_depth() {
     let out = run(&s, &one_pixel(&half));
     assert_eq!(out.rays.reflection, 6);
     assert!(out.reflection[0].x > 0.0);
+}
+
+/// The rt-only rays of `file` (in `tests/data`) at 8×6.
+fn rt_only_rays(file: &str) -> RayCounts {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(file);
+    let s = hybrid_scene::load_scene(&path).unwrap();
+    let prepared = PreparedScene::new(&s);
+    let bvh = SceneBvh::build(&prepared);
+    let g = rt_only_gbuffer(&prepared, &bvh, &s.camera, 8, 6);
+    assert!(g.object_id.iter().all(|&id| id != hybrid_core::NO_OBJECT), "{file}: every pixel sees the scene");
+    trace(&prepared, &bvh, &g, &s.camera).rays
+}
+
+#[test]
+fn ray_trees_stop_at_the_ray_budget() {
+    use hybrid_cpu::trace::TRACE_RAY_BUDGET;
+    // Glass between parallel mirrors: every tree (reflection and refraction per pixel) would
+    // double per glass hit; each is cut at exactly the budget.
+    let rays = rt_only_rays("ray-budget.toml");
+    assert_eq!(rays.reflection + rays.refraction, 48 * 2 * TRACE_RAY_BUDGET as u64, "{rays:?}");
+    // Glass in a mirror box at max_depth 64 (ran for minutes before the budget): bounded.
+    let rays = rt_only_rays("mirror-box.toml");
+    assert!(rays.reflection + rays.refraction <= 48 * 2 * TRACE_RAY_BUDGET as u64, "{rays:?}");
+    assert!(rays.reflection + rays.refraction > 48 * TRACE_RAY_BUDGET as u64, "the budget binds: {rays:?}");
 }

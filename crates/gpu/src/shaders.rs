@@ -41,6 +41,7 @@ pub fn constants() -> String {
         ("BVH_STACK", crate::bvh::STACK_SIZE as u32),
         ("SPHERE_STACK", crate::spheres::STACK),
         ("TRACE_STACK", crate::trace::TRACE_STACK),
+        ("TRACE_RAY_BUDGET", hybrid_scene::TRACE_RAY_BUDGET),
         ("SPAN", crate::heuristic::COUNT_SPAN),
     ];
     // The sky kind is an i32 in WGSL (compared with a signed uniform field).

@@ -116,6 +116,49 @@ impl FrameTargets {
         }
     }
 
+    /// Every texture of the frame (destructured, so a new one cannot be left out): what
+    /// `hybrid_core::memory::GPU_TARGET_BYTES_PER_PIXEL` counts (a test ties the two).
+    pub fn all(&self) -> [&Target; 16] {
+        let Self {
+            width: _,
+            height: _,
+            position,
+            normal,
+            emission,
+            ambient,
+            diffuse,
+            specular,
+            optical,
+            object_id,
+            mask,
+            depth,
+            lighting,
+            shadow,
+            reflection,
+            refraction,
+            final_image,
+            packed,
+        } = self;
+        [
+            position,
+            normal,
+            emission,
+            ambient,
+            diffuse,
+            specular,
+            optical,
+            object_id,
+            mask,
+            depth,
+            lighting,
+            shadow,
+            reflection,
+            refraction,
+            final_image,
+            packed,
+        ]
+    }
+
     /// The G-buffer's colour attachments in `GBUFFER_COLOR_FORMATS` order.
     pub fn gbuffer_color_views(&self) -> [&wgpu::TextureView; 8] {
         [

@@ -31,9 +31,10 @@ pub const TRACE_WGSL: &str = include_str!("shaders/trace.wgsl");
 /// is depth first, so at most one pending sibling per level.
 pub const TRACE_STACK: u32 = 32;
 
-/// The deepest secondary ray the GPU traces: the scene format's `MAX_TRACE_DEPTH` capped by the
-/// pending-ray stack.
-pub const GPU_MAX_TRACE_DEPTH: u32 = if hybrid_scene::MAX_TRACE_DEPTH < TRACE_STACK { hybrid_scene::MAX_TRACE_DEPTH } else { TRACE_STACK };
+/// The deepest secondary ray the GPU traces: `hybrid_scene::MAX_TRACED_DEPTH`, as the CPU (the
+/// depth-first walk keeps at most one pending sibling per level, so the stack holds it).
+pub const GPU_MAX_TRACE_DEPTH: u32 = hybrid_scene::MAX_TRACED_DEPTH;
+const _: () = assert!(TRACE_STACK >= GPU_MAX_TRACE_DEPTH, "the pending-ray stack must hold the deepest tree");
 
 /// `struct TraceParams` in trace.wgsl (the scene's `[trace]` settings).
 #[repr(C)]

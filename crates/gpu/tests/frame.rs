@@ -61,6 +61,36 @@ fn assert_matches(name: &str, mode: Mode, c: &Frame, g: &Frame, id_slack: f64, l
     cmp
 }
 
+/// The per-tree ray budget cuts the same rays on both backends: glass between parallel mirrors
+/// (every tree would double per glass hit; exact axis-aligned paths), rt-only.
+#[test]
+fn ray_budget_cuts_the_same_rays_as_the_cpu() {
+    let ctx = context();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../cpu/tests/data/ray-budget.toml");
+    let scene = load_scene(&path).unwrap();
+    let (c, g) = render_both(&ctx, &scene, Mode::RtOnly, 8, 6);
+    let budget = u64::from(hybrid_scene::TRACE_RAY_BUDGET);
+    assert_eq!(c.report.rays.reflection + c.report.rays.refraction, 48 * 2 * budget, "{:?}", c.report.rays);
+    assert_eq!((g.report.rays.reflection, g.report.rays.refraction), (c.report.rays.reflection, c.report.rays.refraction));
+    assert_matches("ray-budget", Mode::RtOnly, &c, &g, 0.0, &[]);
+}
+
+#[test]
+fn frame_targets_take_what_the_memory_estimate_counts() {
+    let ctx = context();
+    let targets = hybrid_gpu::targets::FrameTargets::new(&ctx.device, 1, 1);
+    let bytes: u64 = targets
+        .all()
+        .iter()
+        .map(|t| {
+            let format = t.texture.format();
+            let aspect = format.is_depth_stencil_format().then_some(wgpu::TextureAspect::DepthOnly);
+            u64::from(format.block_copy_size(aspect).expect("a copyable format"))
+        })
+        .sum();
+    assert_eq!(bytes, hybrid_core::memory::GPU_TARGET_BYTES_PER_PIXEL);
+}
+
 #[test]
 fn demo_scene_matches_the_cpu_in_every_mode() {
     let ctx = context();

@@ -22,6 +22,7 @@ use toml::Spanned;
 
 use crate::camera::{Camera, CameraPath, Keyframe, Projection};
 use crate::load::{load_model, load_point_cloud, load_texture};
+use crate::memory::{Bytes, MemoryLimit, mesh_bytes, sphere_bytes};
 use crate::model::{
     Attenuation, Budget, DirectionalLight, Environment, HeuristicSettings, Lights, MAX_DIRECTIONAL_LIGHTS, MAX_POINT_LIGHTS,
     MAX_SPOT_LIGHTS, Material, MaterialId, Mesh, Object, ObjectSource, PointCloud, PointColoring, PointLight, Policy, Skybox, SpotLight,
@@ -38,16 +39,41 @@ pub const DEMO_SCENE_TOML: &str = include_str!("../../../scenes/demo.toml");
 /// Largest accepted `trace.max_depth`.
 pub const MAX_TRACE_DEPTH: u32 = 64;
 
-/// Loads and validates a scene file; relative paths inside are relative to the file.
+/// The deepest level either backend traces, whatever `trace.max_depth` says (above it the value
+/// is accepted and traced to this depth): the GPU's pending-ray stack holds 32 rays, and the CPU
+/// stops at the same depth so both give the same image (issue 22).
+pub const MAX_TRACED_DEPTH: u32 = 32;
+
+/// Most secondary rays one ray tree may trace: the ray leaving the G-buffer surface and every
+/// reflection and refraction below it (issue 22). Depth alone does not bound the work: glass in
+/// a mirror box spawns two rays per hit, 2^depth of them. Children are admitted in the order
+/// both backends visit the tree (refraction subtree first), so the cut is the same on both; a
+/// child over the budget is untraced, as one below the importance cutoff (it contributes 0).
+pub const TRACE_RAY_BUDGET: u32 = 64;
+
+/// Loads and validates a scene file; relative paths inside are relative to the file. Its data
+/// must fit this machine's default memory limit ([`MemoryLimit::machine_default`]).
 pub fn load_scene(path: &Path) -> Result<Scene, SceneError> {
+    load_scene_within(path, &MemoryLimit::machine_default())
+}
+
+/// [`load_scene`] with the scene's own data (meshes as instantiated, textures, points) checked
+/// against `limit` as it is built: a primitive or model that would take it above the limit is an
+/// error at its line, before its memory is allocated.
+pub fn load_scene_within(path: &Path, limit: &MemoryLimit) -> Result<Scene, SceneError> {
     let bytes = crate::load::read_capped(path, "scene file", crate::load::MAX_SCENE_FILE_BYTES)?;
     let text = String::from_utf8(bytes).map_err(|e| SceneError::new(path, format!("cannot read scene file: not UTF-8 text ({e})")))?;
-    parse_scene(&text, path)
+    parse_scene_within(&text, path, limit)
 }
 
 /// Parses scene TOML `text`; `path` names it in errors and is the base of relative paths.
 pub fn parse_scene(text: &str, path: &Path) -> Result<Scene, SceneError> {
-    parse_scene_preloaded(text, path, None)
+    parse_scene_within(text, path, &MemoryLimit::machine_default())
+}
+
+/// [`parse_scene`] with the scene's data checked against `limit` (see [`load_scene_within`]).
+pub fn parse_scene_within(text: &str, path: &Path, limit: &MemoryLimit) -> Result<Scene, SceneError> {
+    parse_scene_preloaded(text, path, limit, None)
 }
 
 /// A model or point-cloud file already loaded (the bare-model path loads it for its bounds),
@@ -64,9 +90,14 @@ fn same_file(a: &Path, b: &Path) -> bool {
     matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
 }
 
-/// [`parse_scene`], with the first model or point cloud that names `preloaded`'s file taken
-/// from it instead of loading the file.
-pub(crate) fn parse_scene_preloaded(text: &str, path: &Path, preloaded: Option<Preloaded>) -> Result<Scene, SceneError> {
+/// [`parse_scene_within`], with the first model or point cloud that names `preloaded`'s file
+/// taken from it instead of loading the file.
+pub(crate) fn parse_scene_preloaded(
+    text: &str,
+    path: &Path,
+    limit: &MemoryLimit,
+    preloaded: Option<Preloaded>,
+) -> Result<Scene, SceneError> {
     let file: SceneFile = toml::from_str(text).map_err(|e| match e.span() {
         Some(span) => SceneError::at(path, text, span, e.message().trim_end()),
         None => SceneError::new(path, e.message().trim_end()),
@@ -81,6 +112,8 @@ pub(crate) fn parse_scene_preloaded(text: &str, path: &Path, preloaded: Option<P
         texture_cache: HashMap::new(),
         model_cache: HashMap::new(),
         preloaded,
+        limit,
+        held: 0,
     };
     b.build(file)
 }
@@ -372,6 +405,10 @@ struct Builder<'a> {
     model_cache: HashMap<PathBuf, Vec<Mesh>>,
     /// A file the caller already loaded; taken by the first entry that names it.
     preloaded: Option<Preloaded>,
+    /// The memory the scene's data may take.
+    limit: &'a MemoryLimit,
+    /// Bytes of data built so far (meshes as instantiated, model cache, textures, points).
+    held: u64,
 }
 
 fn v3(a: [f32; 3]) -> Vec3 {
@@ -379,6 +416,26 @@ fn v3(a: [f32; 3]) -> Vec3 {
 }
 
 impl Builder<'_> {
+    /// Counts `bytes` more of scene data for `what` (at `span`), refusing them when the total
+    /// would pass the memory limit.
+    fn reserve(&mut self, span: Range<usize>, what: &str, bytes: u64) -> Res<()> {
+        let total = self.held.saturating_add(bytes);
+        if total > self.limit.bytes {
+            return Err(self.err(
+                span,
+                format!(
+                    "{what} needs {} more, which would bring the scene's data to {}, above the memory limit of {}; \
+                     raise the limit with --max-memory or make the scene smaller",
+                    Bytes(bytes),
+                    Bytes(total),
+                    self.limit.describe()
+                ),
+            ));
+        }
+        self.held = total;
+        Ok(())
+    }
+
     fn err(&self, span: Range<usize>, msg: impl Into<String>) -> SceneError {
         SceneError::at(self.path, self.text, span, msg)
     }
@@ -536,6 +593,8 @@ impl Builder<'_> {
             return Ok(id);
         }
         let tex = load_texture(&resolved, cs).map_err(|e| self.err(v.span(), format!("cannot load texture `{}`: {e}", v.get_ref())))?;
+        let texels: u64 = tex.levels.iter().map(|l| l.texels.len() as u64 * 4).sum();
+        self.reserve(v.span(), &format!("texture `{}`", v.get_ref()), texels)?;
         let id = self.textures.len();
         self.textures.push(tex);
         self.texture_cache.insert(key, id);
@@ -852,6 +911,11 @@ impl Builder<'_> {
                         };
                         let slices = seg(&o.slices, "slices", primitives::MIN_SPHERE_SLICES, DEFAULT_SLICES)?;
                         let stacks = seg(&o.stacks, "stacks", primitives::MIN_SPHERE_STACKS, DEFAULT_STACKS)?;
+                        self.reserve(
+                            p.span(),
+                            &format!("sphere `{name}` ({slices} slices × {stacks} stacks)"),
+                            sphere_bytes(slices, stacks),
+                        )?;
                         (primitives::sphere(slices, stacks), ObjectSource::Sphere { slices, stacks })
                     }
                 };
@@ -877,18 +941,25 @@ impl Builder<'_> {
                     None if is_gltf => None,
                     None => Some(DEFAULT_CREASE_ANGLE_DEG),
                 };
-                let mut meshes = match self.model_cache.get(&resolved) {
-                    Some(meshes) => meshes.clone(),
-                    None => {
-                        let meshes = match self.take_preloaded_model(&resolved) {
-                            Some(meshes) => meshes,
-                            None => load_model(&resolved, &mut self.materials, &mut self.textures)
-                                .map_err(|e| self.err(m.span(), format!("cannot load model `{}`: {e}", m.get_ref())))?,
-                        };
-                        self.model_cache.insert(resolved.clone(), meshes.clone());
-                        meshes
-                    }
-                };
+                if !self.model_cache.contains_key(&resolved) {
+                    let textures_before = self.textures.len();
+                    let meshes = match self.take_preloaded_model(&resolved) {
+                        Some(meshes) => meshes,
+                        None => load_model(&resolved, &mut self.materials, &mut self.textures)
+                            .map_err(|e| self.err(m.span(), format!("cannot load model `{}`: {e}", m.get_ref())))?,
+                    };
+                    // The cached copy and the model's own textures.
+                    let texels: u64 =
+                        self.textures[textures_before..].iter().flat_map(|t| &t.levels).map(|l| l.texels.len() as u64 * 4).sum();
+                    let cached: u64 = meshes.iter().map(mesh_bytes).sum();
+                    self.reserve(m.span(), &format!("model `{}`", m.get_ref()), cached + texels)?;
+                    self.model_cache.insert(resolved.clone(), meshes);
+                }
+                let cached = &self.model_cache[&resolved];
+                // Each object is a copy of the model's meshes.
+                let copy: u64 = cached.iter().map(mesh_bytes).sum();
+                self.reserve(m.span(), &format!("object `{name}` (a copy of model `{}`)", m.get_ref()), copy)?;
+                let mut meshes = self.model_cache[&resolved].clone();
                 if meshes.is_empty() {
                     return Err(self.err(m.span(), format!("model `{}` contains no triangle meshes", m.get_ref())));
                 }
@@ -1038,6 +1109,8 @@ impl Builder<'_> {
             None => load_point_cloud(&resolved)
                 .map_err(|e| self.err(p.file.span(), format!("cannot load point cloud `{}`: {e}", p.file.get_ref())))?,
         };
+        let bytes = (points.len() * std::mem::size_of::<Vec3>() + colors.len() * 3) as u64;
+        self.reserve(p.file.span(), &format!("point cloud `{}` ({} points)", p.file.get_ref(), points.len()), bytes)?;
         if !colors.is_empty() && colors.len() != points.len() {
             return Err(self
                 .err(p.file.span(), format!("point cloud `{}`: {} colours for {} points", p.file.get_ref(), colors.len(), points.len())));
@@ -1085,5 +1158,21 @@ mod tests {
         assert_eq!(s.objects.len(), 9);
         assert_eq!((s.lights.directional.len(), s.lights.point.len(), s.lights.spot.len()), (1, 1, 1));
         assert!(s.camera_path.is_some());
+    }
+
+    #[test]
+    fn scene_data_is_checked_against_the_memory_limit_before_it_is_built() {
+        let text = "[[material]]\nname = \"m\"\n\n[[object]]\nprimitive = \"sphere\"\nmaterial = \"m\"\nslices = 64\nstacks = 32\n\n\
+                    [[object]]\nprimitive = \"sphere\"\nmaterial = \"m\"\nslices = 64\nstacks = 32\n";
+        let one = crate::memory::sphere_bytes(64, 32);
+        let path = Path::new("limits.toml");
+        // Room for exactly two spheres.
+        let scene = parse_scene_within(text, path, &MemoryLimit::explicit(2 * one)).unwrap();
+        assert_eq!(scene.objects.len(), 2);
+        // One byte less: the second sphere is refused, at its line, naming the limit.
+        let e = parse_scene_within(text, path, &MemoryLimit::explicit(2 * one - 1)).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("limits.toml:11:") && msg.contains("sphere `sphere-2` (64 slices × 32 stacks)"), "{msg}");
+        assert!(msg.contains("above the memory limit of") && msg.contains("(--max-memory)"), "{msg}");
     }
 }

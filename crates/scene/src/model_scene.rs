@@ -15,8 +15,9 @@ use glam::Vec3;
 
 use crate::file::{Preloaded, parse_scene_preloaded};
 use crate::load::{MAX_MODEL_BYTES, check_file, load_model, load_point_cloud};
+use crate::memory::MemoryLimit;
 use crate::model::Aabb;
-use crate::{Scene, SceneError, load_scene};
+use crate::{Scene, SceneError, load_scene_within};
 
 /// What `render`, `bench` and `inspect` accept, for error messages.
 pub const ACCEPTED_INPUTS: &str = "a scene file (.toml) or a model file (.gltf, .glb, .obj, .ply; point clouds .ply, .las, .laz)";
@@ -80,8 +81,14 @@ fn ply_has_faces(path: &Path) -> Result<bool, SceneError> {
 /// The scene for `path`: a `.toml` scene file is loaded as it is; a model or point-cloud file gets
 /// the default scene of [`model_scene_toml`]. Any other file is an error that says what is accepted.
 pub fn load_scene_or_model(path: &Path) -> Result<Scene, SceneError> {
+    load_scene_or_model_within(path, &MemoryLimit::machine_default())
+}
+
+/// [`load_scene_or_model`] with the scene's data checked against `limit` as it is built
+/// ([`crate::load_scene_within`]).
+pub fn load_scene_or_model_within(path: &Path, limit: &MemoryLimit) -> Result<Scene, SceneError> {
     match input_kind(path)? {
-        InputKind::Scene => load_scene(path),
+        InputKind::Scene => load_scene_within(path, limit),
         _ => {
             // Paths in the scene are relative to a (virtual) scene file beside the model.
             let dir = path.parent().unwrap_or(Path::new(""));
@@ -89,12 +96,15 @@ pub fn load_scene_or_model(path: &Path) -> Result<Scene, SceneError> {
             let virtual_file = dir.join(format!("{stem}.scene.toml"));
             // The model is loaded once: for the bounds the scene frames, then handed to the parser.
             let (text, preloaded) = model_scene(path, &virtual_file)?;
-            let mut scene = parse_scene_preloaded(&text, &virtual_file, Some(preloaded))?;
+            let mut scene = parse_scene_preloaded(&text, &virtual_file, limit, Some(preloaded))?;
             scene.source = Some(path.to_path_buf());
             Ok(scene)
         }
     }
 }
+
+/// Largest coordinate a bare model may have for its default scene to be computed in f32.
+const MAX_FRAMED_COORDINATE: f32 = 1e18;
 
 /// The default scene around the model or point cloud `model` as scene-file TOML, with the
 /// model's path written relative to the directory of `scene_file` (where the text will be saved).
@@ -122,6 +132,18 @@ fn model_scene(model: &Path, scene_file: &Path) -> Result<(String, Preloaded), S
     };
     if bounds.is_empty() {
         return Err(SceneError::new(model, "the model has no vertices, so there is nothing to frame"));
+    }
+    // The camera, far plane and ground are computed from the bounds (their diagonal squared
+    // included): far beyond 1e18 units they overflow to infinity.
+    let reach = bounds.min.abs().max(bounds.max.abs()).max_element();
+    if reach > MAX_FRAMED_COORDINATE {
+        return Err(SceneError::new(
+            model,
+            format!(
+                "the model reaches {reach:e} units from the origin, too far to frame in a default scene (at most {MAX_FRAMED_COORDINATE:e}); \
+                 write a scene file for it with its own camera"
+            ),
+        ));
     }
     let rel = relative_path(model, scene_file.parent().unwrap_or(Path::new("")));
     Ok((scene_text(&rel, kind, bounds), preloaded))
@@ -242,6 +264,26 @@ mod tests {
     use super::*;
 
     #[test]
+    fn models_too_far_out_to_frame_are_refused_naming_the_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = |name: &str, x: f32| {
+            let p = dir.path().join(name);
+            std::fs::write(&p, format!("v 0 0 0\nv {x} 0 0\nv 0 1 0\nf 1 2 3\n")).unwrap();
+            p
+        };
+        // 2^99: the diagonal's square overflowed and the camera was written at `[inf, inf, inf]`.
+        let far = obj("far.obj", 2f32.powi(99));
+        let e = model_scene_toml(&far, &dir.path().join("far.scene.toml")).unwrap_err();
+        assert!(e.to_string().contains("far.obj") && e.message.contains("too far to frame"), "{e}");
+        assert!(load_scene_or_model(&far).unwrap_err().message.contains("too far to frame"));
+        // At the limit it frames, with finite numbers throughout.
+        let edge = obj("edge.obj", 1e18);
+        let text = model_scene_toml(&edge, &dir.path().join("edge.scene.toml")).unwrap();
+        assert!(!text.contains("inf") && !text.contains("NaN"), "{text}");
+        assert!(load_scene_or_model(&edge).is_ok());
+    }
+
+    #[test]
     fn relative_paths_walk_up_and_down() {
         assert_eq!(relative_path(Path::new("/a/b/m.obj"), Path::new("/a/c")), "../b/m.obj");
         assert_eq!(relative_path(Path::new("/a/b/m.obj"), Path::new("/a/b")), "m.obj");
@@ -270,7 +312,7 @@ mod tests {
         let direct = load_scene_or_model(&model).unwrap();
         let saved = d.join("m.scene.toml");
         std::fs::write(&saved, model_scene_toml(&model, &saved).unwrap()).unwrap();
-        let from_text = load_scene(&saved).unwrap();
+        let from_text = crate::load_scene(&saved).unwrap();
         assert_eq!(direct.materials, from_text.materials);
         assert_eq!(direct.textures, from_text.textures);
         assert_eq!(direct.objects.len(), from_text.objects.len());

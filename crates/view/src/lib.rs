@@ -25,11 +25,14 @@ use std::time::Instant;
 
 use glam::Vec3;
 use hybrid_core::buffer_view::{self, BufferKind, FrameView};
+use hybrid_core::memory;
 use hybrid_core::report::FrameReport;
 use hybrid_core::{FrameSettings, Mode, NO_OBJECT, RT_SCENE_OBJECT};
 use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_gpu::GpuContext;
-use hybrid_scene::{Aabb, Budget, Camera, CameraPath, HeuristicSettings, Lights, Policy, Scene, demo_scene, load_scene_or_model};
+use hybrid_scene::{
+    Aabb, Budget, Camera, CameraPath, HeuristicSettings, Lights, MemoryLimit, Policy, Scene, demo_scene, load_scene_or_model,
+};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -433,6 +436,11 @@ impl App {
     /// On failure the scene that was open stays open.
     fn install(&mut self, scene: Scene) -> Result<(), String> {
         let gpu = self.gfx.as_ref().and_then(|g| g.gpu.as_ref());
+        // Refused before anything is built when the frame at the window's size and the scene do
+        // not fit the machine's memory limit (as `hybrid render` checks `--max-memory`).
+        let size = self.gfx.as_ref().map_or(self.options.size, |g| (g.config.width.max(1), g.config.height.max(1)));
+        let kind = if gpu.is_some() { memory::Backend::Gpu } else { memory::Backend::Cpu };
+        memory::estimate(&scene, kind, size.0, size.1, 0).check(&MemoryLimit::machine_default())?;
         let open = OpenScene::open(scene, gpu, self.knobs)?;
         self.open = Some(open);
         self.reapply();

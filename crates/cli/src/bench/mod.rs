@@ -26,15 +26,16 @@ use std::path::Path;
 
 use hybrid_core::report::{FrameReport, StageTimings};
 use hybrid_core::{FrameSettings, Mode};
-use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene_or_model};
+use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene_or_model_within};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 use serde_json::json;
 
 use self::plot::{Chart, HLine, Series, write_chart};
 use crate::CliError;
 use crate::args::BenchArgs;
-use crate::output::{ensure_dir, write_bytes};
-use crate::render::{AnyRenderer, Backend, RenderOptions, choose_backend};
+use crate::output::{OutputDir, write_bytes};
+use crate::render::{AnyRenderer, Backend, RenderOptions, check_memory, choose_backend, memory_limit};
 
 /// Warm-up frames rendered (and discarded) at the start of every pass.
 pub const WARMUP_FRAMES: usize = 2;
@@ -54,29 +55,37 @@ use self::stats::*;
 pub fn run(args: BenchArgs) -> Result<(), CliError> {
     check_args(&args)?;
     let name = args.scene.display().to_string();
-    let mut scene = load_scene_or_model(&args.scene)?;
+    let limit = memory_limit(args.max_memory);
+    // The images kept for FLIP are not known before the plan: the frame alone first.
+    hybrid_core::memory::frame_only(args.size.0, args.size.1, 0).check(&limit).map_err(CliError::bad_input)?;
+    let mut scene = load_scene_or_model_within(&args.scene, &limit)?;
     args.heuristic.apply(&mut scene.heuristic);
     let plan = plan(&args, &scene, &name)?;
     let backend = choose_backend(args.backend, args.quiet)?;
+    check_memory(&scene, &backend, args.size, plan.extra_bytes_per_pixel(args.flip_every), &limit)?;
     let backend_name = match &backend {
         Backend::Cpu => "cpu".to_string(),
         Backend::Gpu(ctx) => format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend),
     };
-    // Everything is checked: now the output folder (created and probed before any rendering).
-    ensure_dir(&args.out)?;
+    // Everything is checked: now the output folder (created and probed before any rendering;
+    // removed again if the run fails, when this run created it).
+    let out_dir = OutputDir::prepare(&args.out, "--out")?;
     if let Some(n) = args.threads {
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
     }
 
     let machine_start = load_average();
     let options = RenderOptions::from(&args.capsule);
-    let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options };
     let mut modes: Vec<Mode> = Vec::new();
     for m in &args.modes {
         if !modes.contains(m) {
             modes.push(*m);
         }
     }
+    let total =
+        planned_frames(&modes, args.frames as usize, plan.path_shots.as_ref().map(Vec::len), args.flip_every as usize, args.sweep_budget);
+    let progress = progress_bar(args.quiet, total);
+    let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options, progress };
     if !args.quiet {
         eprintln!(
             "bench {name}: {}x{}, {} static frame{}, modes {}",
@@ -217,6 +226,20 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         "static": static_summary,
         "path": path_summary,
         "sweep": if args.sweep_budget { json!(sweep) } else { json!(null) },
+        // Passes of 100 frames or more: resident memory after frame 100 and at the end (soak).
+        "resident_memory": static_passes
+            .iter()
+            .map(|(m, p)| (format!("static {m}"), p.rss))
+            .chain(path_passes.iter().map(|(m, p)| (format!("path {m}"), p.rss)))
+            .filter_map(|(k, r)| r.map(|r| (k, json!({
+                    "frame_100_kib": r.frame_100_kib,
+                    "end_kib": r.end_kib,
+                    "frames": r.frames,
+                    "kept_bytes": r.kept_bytes,
+                    "growth": r.growth(),
+                    "growth_beyond_kept": r.growth_beyond_kept(),
+                }))))
+            .collect::<serde_json::Map<_, _>>(),
     });
 
     // Outputs (each written atomically).
@@ -230,6 +253,8 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         write_bytes(&out.join("sweep.csv"), sweep_csv(&sweep).as_bytes())?;
         write_chart(&out.join("sweep.png"), &sweep_chart(&name, &sweep))?;
     }
+    bench.progress.finish_and_clear();
+    out_dir.keep();
     print!(
         "{}",
         markdown(&name, &args, &machine, &static_summary, &path_summary, &sweep, scene.point_clouds.is_empty(), plan.path_seconds)
@@ -237,9 +262,57 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     Ok(())
 }
 
+/// Frames the run renders, warm-ups included, pass by pass as `run` renders them: the static set
+/// (each mode, and an rt-only reference of one frame when the sweep needs one and there is no
+/// path), the path set (its rt-only reference on every `flip_every`-th frame, each other mode on
+/// every frame) and the sweep (2 policies × [`SWEEP_FRACTIONS`] on the path, or on the static
+/// frames).
+fn planned_frames(modes: &[Mode], frames: usize, path_frames: Option<usize>, flip_every: usize, sweep: bool) -> u64 {
+    let pass = |shots: usize| (WARMUP_FRAMES + shots) as u64;
+    let mut total = modes.len() as u64 * pass(frames);
+    if sweep && path_frames.is_none() && !modes.contains(&Mode::RtOnly) {
+        total += pass(1);
+    }
+    if let Some(n) = path_frames {
+        total += pass(n.div_ceil(flip_every.max(1)));
+        total += modes.iter().filter(|m| **m != Mode::RtOnly).count() as u64 * pass(n);
+    }
+    if sweep {
+        total += 2 * SWEEP_FRACTIONS.len() as u64 * pass(path_frames.unwrap_or(frames));
+    }
+    total
+}
+
+/// The run's progress bar on stderr (hidden with `--quiet`; indicatif hides it by itself when
+/// stderr is not a terminal, so logs and tests see only the per-pass lines).
+fn progress_bar(quiet: bool, total: u64) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+    if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:24}] frame {pos}/{len}, {elapsed} elapsed, ETA {eta}") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn planned_frames_by_hand() {
+        let (h, a, r) = (Mode::Hybrid, Mode::All, Mode::RtOnly);
+        // Default modes, 20 static frames, a 40-frame path, FLIP every 10th, no sweep:
+        // static 3 × 22; path reference 2 + 4, hybrid and all 2 × 42.
+        assert_eq!(planned_frames(&[h, a, r], 20, Some(40), 10, false), 66 + 6 + 84);
+        // With the sweep on the path: + 10 × 42.
+        assert_eq!(planned_frames(&[h, a, r], 20, Some(40), 10, true), 66 + 6 + 84 + 420);
+        // No path, sweep without rt-only: static 1 × 22, the 1-frame reference 3, the sweep 10 × 22.
+        assert_eq!(planned_frames(&[h], 20, None, 10, true), 22 + 3 + 220);
+        // 41 path frames every 10th: 5 reference frames.
+        assert_eq!(planned_frames(&[r], 1, Some(41), 10, false), 3 + 7);
+    }
 
     #[test]
     fn stats() {

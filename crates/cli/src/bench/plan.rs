@@ -16,6 +16,20 @@ pub(super) struct Plan {
     pub(super) path_seconds: Option<f32>,
 }
 
+/// FLIP's working memory per pixel: the two RGB8 images as floats, its colour and feature
+/// pipelines' intermediate images and the error map (about six float RGB images).
+pub(super) const FLIP_BYTES_PER_PIXEL: u64 = 6 * 12 + 4;
+
+impl Plan {
+    /// Memory per pixel beyond one frame: the RGB images kept for FLIP at once (the path's
+    /// rt-only references and one pass's frames, every `flip_every`-th; the static set's last
+    /// frame of up to four modes and its reference) at 3 bytes a pixel, and FLIP's own.
+    pub(super) fn extra_bytes_per_pixel(&self, flip_every: u32) -> u64 {
+        let path_frames = self.path_shots.as_ref().map_or(0, |s| s.len().div_ceil(flip_every.max(1) as usize)) as u64;
+        3 * (2 * path_frames + 5) + FLIP_BYTES_PER_PIXEL
+    }
+}
+
 pub(super) fn check_args(args: &BenchArgs) -> Result<(), CliError> {
     if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
         return Err(CliError::bad_input(format!("--fps must be a number of frames per second in (0, 1000], got {}", args.fps)));

@@ -59,6 +59,12 @@ open("ply-undercount.ply", "w").write(
     "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
     "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
     "0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n")
+# Binary PLY whose body is longer than the header says: a triangle more than its one face.
+tri = struct.pack("<B3i", 3, 0, 1, 2)
+open("ply-binary-trailing.ply", "wb").write(
+    b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+    b"element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    + struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) + tri + tri)
 # PLY with a coordinate declared as a list.
 open("ply-coordinate-list.ply", "w").write(
     "ply\nformat ascii 1.0\nelement vertex 3\nproperty list uchar float x\nproperty float y\nproperty float z\n"

@@ -107,6 +107,9 @@ fn trace_secondary(origin: vec3<f32>, dir: vec3<f32>, importance: f32, kind: u32
     var stack: array<PendingRay, TRACE_STACK>;
     stack[0] = PendingRay(origin, importance, dir, 1.0, 1u, kind);
     var sp = 1u;
+    // Rays of this tree admitted so far (the root included), against TRACE_RAY_BUDGET: children
+    // are admitted reflection first, and popped refraction first, as the CPU visits them.
+    var admitted = 1u;
     var color = vec3<f32>(0.0);
     let max_depth = params.max_depth;
     let env_ior = frame.env_ambient.w;
@@ -150,13 +153,15 @@ fn trace_secondary(origin: vec3<f32>, dir: vec3<f32>, importance: f32, kind: u32
         }
         color += r.weight * wc * lighting;
         let refl_imp = r.importance * om;
-        if refl_imp > params.importance_cutoff && sp < TRACE_STACK {
+        if refl_imp > params.importance_cutoff && sp < TRACE_STACK && admitted < TRACE_RAY_BUDGET {
+            admitted += 1u;
             let d = normalize_or(reflect_dir(r.dir, s.normal), vec3<f32>(0.0));
             stack[sp] = PendingRay(offset_origin(s.position, s.normal, d), refl_imp, d, r.weight * wm, r.depth + 1u, KIND_REFLECTION);
             sp += 1u;
         }
         let refr_imp = r.importance * or;
-        if refr_imp > params.importance_cutoff && sp < TRACE_STACK {
+        if refr_imp > params.importance_cutoff && sp < TRACE_STACK && admitted < TRACE_RAY_BUDGET {
+            admitted += 1u;
             let d = refract_or_reflect(r.dir, s.normal, env_ior, s.ior).xyz;
             stack[sp] = PendingRay(offset_origin(s.position, s.normal, d), refr_imp, d, r.weight * wr, r.depth + 1u, KIND_REFRACTION);
             sp += 1u;

@@ -426,10 +426,17 @@ impl<'a> PlyFile<'a> {
         Ok(())
     }
 
-    /// ASCII files: nothing but blank lines may follow the last element. More data means the
-    /// header under-counts an element (e.g. a vertex line then read as a face).
+    /// Nothing may follow the last element: in ASCII files nothing but blank lines, in binary
+    /// files no byte. More data means the header under-counts an element (e.g. a vertex line then
+    /// read as a face, or a binary body cut from a larger file).
     fn check_no_trailing_data(&mut self, last: &str) -> Result<(), SceneError> {
         if self.header.encoding != Encoding::Ascii {
+            let extra = self.bytes_left();
+            if extra > 0 {
+                return Err(self.err(format!(
+                    "{extra} byte(s) of data after the last {last}: the header's element counts are smaller than the binary body"
+                )));
+            }
             return Ok(());
         }
         let mut extra = 0usize;
@@ -534,7 +541,11 @@ pub(super) fn load_points(path: &Path) -> Result<(Vec<Vec3>, Vec<[u8; 3]>), Scen
             }
             Ok(())
         })?;
-        // Everything after the vertices (faces, ...) is not needed for a point cloud.
+        // Everything after the vertices (faces, ...) is not needed for a point cloud; when
+        // nothing should follow, nothing may.
+        if header.elements.keys().last().is_some_and(|k| k == "vertex") {
+            f.check_no_trailing_data("vertex")?;
+        }
         return Ok((points, colors));
     }
     Err(f.err("PLY file has no `vertex` element"))
@@ -673,6 +684,14 @@ mod tests {
         // Cut inside the second record: a clean error.
         let e = load_points(&write(dir.path(), "cut.ply", &bin[..bin.len() - 3])).unwrap_err();
         assert!(e.message.contains("ends early"), "{e}");
+        // Longer than the header says (one more byte, one more record): an error naming the file.
+        for extra in [vec![0u8], bin[bin.len() - 16..].to_vec()] {
+            let long = [bin.clone(), extra.clone()].concat();
+            let p = write(dir.path(), "long.ply", &long);
+            let e = load_points(&p).unwrap_err();
+            assert!(e.to_string().contains("long.ply"), "{e}");
+            assert!(e.message.contains(&format!("{} byte(s) of data after the last vertex", extra.len())), "{e}");
+        }
     }
 
     #[test]
@@ -689,6 +708,11 @@ mod tests {
         let m = load_mesh(&p, &mut Vec::new()).unwrap();
         assert_eq!(m[0].positions[1], Vec3::X);
         assert_eq!(m[0].indices, vec![[0, 1, 2]]);
+        // A face more in the body than in the header.
+        let face = [vec![3], 0i32.to_be_bytes().to_vec(), 2i32.to_be_bytes().to_vec(), 1i32.to_be_bytes().to_vec()].concat();
+        let p = write(dir.path(), "extra-face.ply", &[good.clone(), face].concat());
+        let e = load_mesh(&p, &mut Vec::new()).unwrap_err();
+        assert!(e.message.contains("13 byte(s) of data after the last face"), "{e}");
 
         let neg = [b.clone(), vec![3], 0i32.to_be_bytes().to_vec(), (-1i32).to_be_bytes().to_vec(), 2i32.to_be_bytes().to_vec()].concat();
         let p = write(dir.path(), "neg.ply", &neg);
