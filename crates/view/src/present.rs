@@ -31,12 +31,12 @@ struct Params {
     size: vec2<f32>,
     // 1 when the swapchain encodes sRGB itself (decode first).
     decode: u32,
-    // 1 when `highlight` names an object to tint.
-    has_highlight: u32,
+    // `fs_highlight`: the object to tint.
     highlight: u32,
     _pad0: u32,
     _pad1: u32,
     _pad2: u32,
+    _pad3: u32,
 };
 @group(0) @binding(1) var<uniform> params: Params;
 @group(0) @binding(2) var ids: texture_2d<u32>;
@@ -200,8 +200,7 @@ impl Blit {
         params[0] = (target_size.0 as f32).to_bits();
         params[1] = (target_size.1 as f32).to_bits();
         params[2] = self.decode_srgb as u32;
-        params[3] = id.is_some() as u32;
-        params[4] = id.unwrap_or(0);
+        params[3] = id.unwrap_or(0);
         let bytes: Vec<u8> = params.iter().flat_map(|v| v.to_le_bytes()).collect();
         queue.write_buffer(&self.params, 0, &bytes);
         let reuse = self.bound.as_ref().is_some_and(|(s, i, _)| s == src && i == ids);
