@@ -107,13 +107,85 @@ fn import(path: &Path) -> Result<(::gltf::Document, Vec<::gltf::buffer::Data>, V
         }
     }
     check_extensions(&value, "").map_err(|m| SceneError::new(path, m))?;
+    check_primitive_accessors(&value).map_err(|m| SceneError::new(path, m))?;
+    check_uris(&value).map_err(|m| SceneError::new(path, m))?;
     let json = ::gltf::json::serialize::to_vec(&value).map_err(|e| fail("invalid glTF JSON", &e))?;
-    let gltf = ::gltf::Gltf::from_slice(&json).map_err(|e| fail("invalid glTF", &e))?;
-    let base = path.parent();
-    check_external_files(path, &gltf.document)?;
-    let buffers = ::gltf::import_buffers(&gltf.document, base, blob).map_err(|e| fail("cannot load glTF buffers", &e))?;
-    let images = ::gltf::import_images(&gltf.document, base, &buffers).map_err(|e| fail("cannot load glTF images", &e))?;
-    Ok((gltf.document, buffers, images))
+    // The checks above cover the panics fuzzing found in gltf 1.4.1; a panic left in it is still
+    // its bug, turned into an error naming the file rather than taking the caller down.
+    let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<_, SceneError> {
+        let gltf = ::gltf::Gltf::from_slice(&json).map_err(|e| fail("invalid glTF", &e))?;
+        let base = path.parent();
+        check_external_files(path, &gltf.document)?;
+        let buffers = ::gltf::import_buffers(&gltf.document, base, blob).map_err(|e| fail("cannot load glTF buffers", &e))?;
+        let images = ::gltf::import_images(&gltf.document, base, &buffers).map_err(|e| fail("cannot load glTF images", &e))?;
+        Ok((gltf.document, buffers, images))
+    }));
+    parsed.unwrap_or_else(|_| Err(SceneError::new(path, "the glTF parser (gltf) failed on this file")))
+}
+
+/// Every accessor a mesh primitive names (attributes, morph targets, indices) must exist:
+/// gltf-json's validation reads the POSITION accessor by its index before checking the index (an
+/// index-out-of-bounds panic in gltf 1.4.1, found by fuzzing: fuzz/README.md).
+fn check_primitive_accessors(v: &::gltf::json::Value) -> Result<(), String> {
+    let n = v.get("accessors").and_then(|a| a.as_array()).map_or(0, |a| a.len());
+    let meshes = v.get("meshes").and_then(|m| m.as_array());
+    for (mi, mesh) in meshes.into_iter().flatten().enumerate() {
+        for (pi, prim) in mesh.get("primitives").and_then(|p| p.as_array()).into_iter().flatten().enumerate() {
+            let mut refs: Vec<(String, &::gltf::json::Value)> = Vec::new();
+            if let Some(attrs) = prim.get("attributes").and_then(|a| a.as_object()) {
+                refs.extend(attrs.iter().map(|(k, r)| (format!("attribute {k}"), r)));
+            }
+            if let Some(r) = prim.get("indices") {
+                refs.push(("indices".into(), r));
+            }
+            for t in prim.get("targets").and_then(|t| t.as_array()).into_iter().flatten().filter_map(|t| t.as_object()) {
+                refs.extend(t.iter().map(|(k, r)| (format!("morph target {k}"), r)));
+            }
+            for (what, r) in refs {
+                if !r.as_u64().is_some_and(|i| i < n as u64) {
+                    return Err(format!("mesh {mi} primitive {pi}: {what} refers to accessor {r}, and the file has {n} accessors"));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Buffer and image URIs that are not `data:` URIs must percent-decode to UTF-8: gltf 1.4.1
+/// unwraps the decoded path (a panic, found by fuzzing).
+fn check_uris(v: &::gltf::json::Value) -> Result<(), String> {
+    for (kind, list) in [("buffer", "buffers"), ("image", "images")] {
+        for (i, item) in v.get(list).and_then(|l| l.as_array()).into_iter().flatten().enumerate() {
+            if let Some(uri) = item.get("uri").and_then(|u| u.as_str())
+                && !uri.starts_with("data:")
+                && percent_decoded(uri).is_none()
+            {
+                return Err(format!("{kind} {i}: its URI is not valid percent-encoded UTF-8"));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `%XX` sequences decoded (others kept as they are), if the result is UTF-8.
+fn percent_decoded(s: &str) -> Option<String> {
+    let b = s.as_bytes();
+    let hex = |c: u8| (c as char).to_digit(16);
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        match (b[i], b.get(i + 1).and_then(|&c| hex(c)), b.get(i + 2).and_then(|&c| hex(c))) {
+            (b'%', Some(h), Some(l)) => {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+            }
+            (c, _, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8(out).ok()
 }
 
 /// External buffers and images (relative URIs, not `data:`) must be regular files within the
@@ -425,6 +497,14 @@ fn to_rgba8(d: &::gltf::image::Data) -> Option<Vec<[u8; 4]>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn uris_percent_decode_like_the_gltf_crate() {
+        assert_eq!(percent_decoded("a%20b.bin").as_deref(), Some("a b.bin"));
+        assert_eq!(percent_decoded("100%.bin").as_deref(), Some("100%.bin"), "a lone % stays");
+        assert_eq!(percent_decoded("%C3%A9.png").as_deref(), Some("é.png"));
+        assert_eq!(percent_decoded("%FF.bin"), None, "not UTF-8 once decoded");
+    }
 
     #[test]
     fn image_formats_become_rgba8() {

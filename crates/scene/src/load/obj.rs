@@ -168,11 +168,24 @@ fn decode_text(path: &Path, bytes: Vec<u8>) -> Result<String, SceneError> {
 
 /// Fixes what tobj cannot read and rejects what it silently accepts:
 /// - `l` (polyline) statements are dropped: lines are not drawn (tobj reads `l a b c d` as a quad);
-/// - an `f` without vertices, or with an index 0 (vertex, texture or normal), is an error;
+/// - an `f` without vertices, or with an index 0 or beyond the file's count of its kind (vertex,
+///   texture or normal), is an error;
 /// - `usemtl` with an empty name selects the material with an empty name;
 /// - exponents written `3.1+e2` / `3.1-e2` are read as `3.1e+2` / `3.1e-2`.
 fn preprocess(path: &Path, text: &str) -> Result<String, SceneError> {
     let mut out = String::with_capacity(text.len() + 1);
+    // How many positions, texture coordinates and normals the file declares: a face index beyond
+    // them cannot be valid, and tobj computes `index * 2` / `index * 3` unchecked (a huge one
+    // overflowed: found by fuzzing, fuzz/README.md).
+    let mut counts = [0i64; 3];
+    for line in text.lines() {
+        match line.split_whitespace().next() {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            _ => {}
+        }
+    }
     let mut offset = 0;
     for line in text.split_inclusive('\n') {
         let start = offset;
@@ -190,6 +203,21 @@ fn preprocess(path: &Path, text: &str) -> Result<String, SceneError> {
                     text,
                     start..start + body.len(),
                     "face (`f`) with index 0 (OBJ vertex, texture and normal indices start at 1; negative ones count back)",
+                ));
+            }
+            Some("f")
+                if body.split_whitespace().skip(1).any(|w| {
+                    w.split('/').zip(counts).any(|(i, n)| i.parse::<i64>().is_ok_and(|i| i.unsigned_abs() > n.unsigned_abs()))
+                }) =>
+            {
+                return Err(SceneError::at(
+                    path,
+                    text,
+                    start..start + body.len(),
+                    format!(
+                        "face (`f`) with an index out of range (the file has {} positions, {} texture coordinates, {} normals)",
+                        counts[0], counts[1], counts[2]
+                    ),
                 ));
             }
             Some("usemtl") if words.next().is_none() => {
@@ -516,6 +544,26 @@ mod tests {
         assert_eq!(mats[0].specular, Vec3::splat(0.25)); // `Ks 0.25` completed, not a tobj panic
         assert_eq!(mats[0].diffuse_map, None);
         assert!(texs.is_empty());
+    }
+
+    #[test]
+    fn face_indices_beyond_the_files_counts_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let obj = dir.path().join("t.obj");
+        let load = |text: &str| {
+            std::fs::write(&obj, text).unwrap();
+            super::super::load_model(&obj, &mut Vec::new(), &mut Vec::new())
+        };
+        assert!(load("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 -1/-1\n").is_ok());
+        for bad in ["f 1 2 4", "f 1/2 2/1 3/1", "f 1//9 2 3", "f -4 2 3", "f 1/18446744073709551 2/1 3/1"] {
+            let e = load(&format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n{bad}\n")).unwrap_err().to_string();
+            assert!(e.contains("index out of range") && e.contains("t.obj"), "{bad}: {e}");
+        }
+        // Found by fuzzing: a texture index that overflowed tobj's `index * 2` (a panic with
+        // overflow checks, a wrong texture coordinate without).
+        let crash = include_str!("../../tests/fuzz-regressions/obj/tobj-texcoord-index-overflow.obj");
+        let e = load(crash).unwrap_err().to_string();
+        assert!(e.contains("index out of range"), "{e}");
     }
 
     #[test]
