@@ -86,6 +86,10 @@ fn check_accessor(a: &Accessor<'_>, buffer_len: &dyn Fn(usize) -> usize) -> Resu
     if count > MAX_ACCESSOR_COUNT {
         return Err(format!("count {count} is above the limit of {MAX_ACCESSOR_COUNT}"));
     }
+    // The spec's minimum; gltf 1.4.1's readers compute `count - 1` (an overflow, found by fuzzing).
+    if count == 0 {
+        return Err("count 0 (glTF accessors hold at least 1 element)".into());
+    }
     if let Some(v) = a.view() {
         check_view(&v, buffer_len)?;
         let stride = v.stride().unwrap_or(elem);
@@ -103,6 +107,9 @@ fn check_accessor(a: &Accessor<'_>, buffer_len: &dyn Fn(usize) -> usize) -> Resu
     }
     if let Some(s) = a.sparse() {
         let n = s.count();
+        if n == 0 {
+            return Err("sparse count 0 (glTF sparse accessors hold at least 1 element)".into());
+        }
         if n > count {
             return Err(format!("sparse count {n} is above the accessor's count {count}"));
         }
