@@ -11,29 +11,30 @@ fn replay(target: &str, file: &Path) -> Result<(), String> {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join(format!("input.{target}"));
     std::fs::copy(file, &input).unwrap();
-    let result = std::panic::catch_unwind(|| match target {
-        "obj" | "gltf" | "glb" => hybrid_scene::load::load_model(&input, &mut Vec::new(), &mut Vec::new()).map(|_| ()),
-        "ply" => hybrid_scene::load::load_model(&input, &mut Vec::new(), &mut Vec::new())
-            .map(|_| ())
-            .and(hybrid_scene::load::load_point_cloud(&input).map(|_| ())),
-        "las" | "laz" => hybrid_scene::load::load_point_cloud(&input).map(|_| ()),
-        "png" | "jpg" => hybrid_scene::load::load_texture(&input, hybrid_scene::ColorSpace::Srgb).map(|_| ()),
-        "scene" => {
-            let text = std::fs::read_to_string(&input).unwrap_or_default();
-            hybrid_scene::parse_scene(&text, &input).map(|_| ())
-        }
-        other => panic!("unknown fuzz target folder `{other}`"),
+    let result = std::panic::catch_unwind(|| -> Result<(), String> {
+        let loaded = match target {
+            "obj" | "gltf" | "glb" => hybrid_scene::load::load_model(&input, &mut Vec::new(), &mut Vec::new()).map(|_| ()),
+            "ply" => hybrid_scene::load::load_model(&input, &mut Vec::new(), &mut Vec::new())
+                .map(|_| ())
+                .and(hybrid_scene::load::load_point_cloud(&input).map(|_| ())),
+            "las" | "laz" => hybrid_scene::load::load_point_cloud(&input).map(|_| ()),
+            "png" | "jpg" => hybrid_scene::load::load_texture(&input, hybrid_scene::ColorSpace::Srgb).map(|_| ()),
+            "scene" => {
+                let text = std::fs::read_to_string(&input).unwrap_or_default();
+                hybrid_scene::parse_scene(&text, &input).map(|_| ())
+            }
+            other => panic!("unknown fuzz target folder `{other}`"),
+        };
+        loaded.map_err(|e| e.to_string())
     });
     match result {
         Err(_) => Err(format!("{}: the loader panicked", file.display())),
         Ok(Ok(())) => Err(format!("{}: accepted; a crash input must be refused", file.display())),
-        Ok(Err(e)) if !e.to_string().contains("input.") => Err(format!("{}: the error does not name the file: {e}", file.display())),
+        Ok(Err(e)) if !e.contains("input.") => Err(format!("{}: the error does not name the file: {e}", file.display())),
         Ok(Err(e)) => {
             let expect = file.with_file_name(format!("{}.expect", file.file_name().unwrap().to_string_lossy()));
             match std::fs::read_to_string(&expect) {
-                Ok(want) if !e.to_string().contains(want.trim()) => {
-                    Err(format!("{}: the error does not say `{}`: {e}", file.display(), want.trim()))
-                }
+                Ok(want) if !e.contains(want.trim()) => Err(format!("{}: the error does not say `{}`: {e}", file.display(), want.trim())),
                 _ => Ok(()),
             }
         }

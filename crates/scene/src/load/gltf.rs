@@ -142,7 +142,7 @@ fn check_primitive_accessors(v: &::gltf::json::Value) -> Result<(), String> {
                 refs.extend(t.iter().map(|(k, r)| (format!("morph target {k}"), r)));
             }
             for (what, r) in refs {
-                if !r.as_u64().is_some_and(|i| i < n as u64) {
+                if r.as_u64().is_none_or(|i| i >= n as u64) {
                     return Err(format!("mesh {mi} primitive {pi}: {what} refers to accessor {r}, and the file has {n} accessors"));
                 }
             }
