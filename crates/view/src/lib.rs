@@ -247,6 +247,18 @@ pub const SCRIPT_DT: f32 = 1.0 / 30.0;
 /// Smallest fraction of the window size the CPU backend renders at while moving.
 const MIN_SCALE: f32 = 1.0 / 16.0;
 
+/// The scene's heuristic settings with `--budget`/`--budget-ms` and `--policy` over them.
+fn heuristic_settings(scene: &Scene, options: &ViewOptions) -> HeuristicSettings {
+    let mut h = scene.heuristic.clone();
+    if let Some(b) = options.budget {
+        h.budget = b;
+    }
+    if let Some(p) = options.policy {
+        h.policy = p;
+    }
+    h
+}
+
 fn fly_speed(camera: &Camera) -> f32 {
     let dist = (camera.target - camera.position).length();
     if dist.is_finite() && dist > 1e-3 { dist * 0.5 } else { 1.0 }
@@ -254,13 +266,7 @@ fn fly_speed(camera: &Camera) -> f32 {
 
 impl App {
     fn new(scene: Scene, options: ViewOptions, script: Option<Vec<Event>>) -> Self {
-        let mut heuristic = scene.heuristic.clone();
-        if let Some(b) = options.budget {
-            heuristic.budget = b;
-        }
-        if let Some(p) = options.policy {
-            heuristic.policy = p;
-        }
+        let heuristic = heuristic_settings(&scene, &options);
         let info = SceneInfo::of(&scene, options.scene.clone());
         Self {
             fly: Fly::new(scene.camera, fly_speed(&scene.camera)),
@@ -432,9 +438,10 @@ impl App {
         })
     }
 
-    /// Builds the renderer for `scene` (on the window's backend) and makes it the open scene.
-    /// On failure the scene that was open stays open.
-    fn install(&mut self, scene: Scene) -> Result<(), String> {
+    /// Builds the renderer for `scene` (on the window's backend) and makes it the open scene,
+    /// with the heuristic's settings and per-object K and E given. On failure the scene that was
+    /// open stays open, with its settings.
+    fn install(&mut self, scene: Scene, heuristic: HeuristicSettings, weights: Vec<Option<(f32, f32)>>) -> Result<(), String> {
         let gpu = self.gfx.as_ref().and_then(|g| g.gpu.as_ref());
         // Refused before anything is built when the frame at the window's size and the scene do
         // not fit the machine's memory limit (as `hybrid render` checks `--max-memory`).
@@ -443,6 +450,8 @@ impl App {
         memory::estimate(&scene, kind, size.0, size.1, 0).check(&MemoryLimit::machine_default())?;
         let open = OpenScene::open(scene, gpu, self.knobs)?;
         self.open = Some(open);
+        self.heuristic = heuristic;
+        self.weights = weights;
         self.reapply();
         Ok(())
     }
@@ -455,19 +464,10 @@ impl App {
             Err(e) => return self.say(format!("cannot open {}: {e}", path.display())),
         };
         let info = SceneInfo::of(&scene, Some(path.clone()));
-        let mut heuristic = scene.heuristic.clone();
-        if let Some(b) = self.options.budget {
-            heuristic.budget = b;
-        }
-        if let Some(p) = self.options.policy {
-            heuristic.policy = p;
-        }
-        let old = std::mem::replace(&mut self.heuristic, heuristic);
-        let old_weights = std::mem::replace(&mut self.weights, vec![None; scene.objects.len()]);
+        let heuristic = heuristic_settings(&scene, &self.options);
+        let weights = vec![None; scene.objects.len()];
         let camera = scene.camera;
-        if let Err(e) = self.install(scene) {
-            self.heuristic = old;
-            self.weights = old_weights;
+        if let Err(e) = self.install(scene, heuristic, weights) {
             return self.say(format!("cannot open {}: {e}", path.display()));
         }
         self.info = info;
@@ -506,15 +506,7 @@ impl App {
         let Some(open) = self.open.take() else { return Ok(()) };
         let mut scene = open.into_owner();
         scene.lights = lights_switched(&self.info.all_lights, &self.info.lights_on);
-        let gpu = self.gfx.as_ref().and_then(|g| g.gpu.as_ref());
-        match OpenScene::open(scene, gpu, self.knobs) {
-            Ok(open) => {
-                self.open = Some(open);
-                self.reapply();
-                Ok(())
-            }
-            Err(e) => Err(e),
-        }
+        self.install(scene, self.heuristic.clone(), self.weights.clone())
     }
 
     /// Applies what a key, the overlay or the script asked for.
@@ -1093,7 +1085,7 @@ impl ApplicationHandler for App {
         }
         if let Some(scene) = self.first_scene.take() {
             let file = self.info.path.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
-            if let Err(e) = self.install(scene) {
+            if let Err(e) = self.install(scene, self.heuristic.clone(), self.weights.clone()) {
                 self.fail(event_loop, ViewError::bad_input(format!("{file}: {e}")));
             }
         }
