@@ -177,7 +177,7 @@ fn preprocess(path: &Path, text: &str) -> Result<String, SceneError> {
     // How many positions, texture coordinates and normals the file declares: a face index beyond
     // them cannot be valid, and tobj computes `index * 2` / `index * 3` unchecked (a huge one
     // overflowed: found by fuzzing, fuzz/README.md).
-    let mut counts = [0i64; 3];
+    let mut counts = [0u64; 3];
     for line in text.lines() {
         match line.split_whitespace().next() {
             Some("v") => counts[0] += 1,
@@ -197,28 +197,8 @@ fn preprocess(path: &Path, text: &str) -> Result<String, SceneError> {
             Some("f") if words.next().is_none() => {
                 return Err(SceneError::at(path, text, start..start + body.len(), "face (`f`) without vertices"));
             }
-            Some("f") if body.split_whitespace().skip(1).any(|w| w.split('/').any(|i| i.parse::<i64>() == Ok(0))) => {
-                return Err(SceneError::at(
-                    path,
-                    text,
-                    start..start + body.len(),
-                    "face (`f`) with index 0 (OBJ vertex, texture and normal indices start at 1; negative ones count back)",
-                ));
-            }
-            Some("f")
-                if body.split_whitespace().skip(1).any(|w| {
-                    w.split('/').zip(counts).any(|(i, n)| i.parse::<i64>().is_ok_and(|i| i.unsigned_abs() > n.unsigned_abs()))
-                }) =>
-            {
-                return Err(SceneError::at(
-                    path,
-                    text,
-                    start..start + body.len(),
-                    format!(
-                        "face (`f`) with an index out of range (the file has {} positions, {} texture coordinates, {} normals)",
-                        counts[0], counts[1], counts[2]
-                    ),
-                ));
+            Some("f") if let Some(problem) = face_index_problem(body, counts) => {
+                return Err(SceneError::at(path, text, start..start + body.len(), problem));
             }
             Some("usemtl") if words.next().is_none() => {
                 out.push_str("usemtl ");
@@ -236,6 +216,26 @@ fn preprocess(path: &Path, text: &str) -> Result<String, SceneError> {
         out.push('\n');
     }
     Ok(out)
+}
+
+/// What is wrong with the indices of the face statement `body`, if anything: an index 0, or one
+/// beyond the file's `counts` of positions, texture coordinates and normals (negative indices
+/// count back, so their magnitude is checked).
+fn face_index_problem(body: &str, counts: [u64; 3]) -> Option<String> {
+    let indices: Vec<(i64, u64)> = body
+        .split_whitespace()
+        .skip(1)
+        .flat_map(|w| w.split('/').zip(counts).filter_map(|(i, n)| i.parse::<i64>().ok().map(|i| (i, n))))
+        .collect();
+    if indices.iter().any(|&(i, _)| i == 0) {
+        return Some("face (`f`) with index 0 (OBJ vertex, texture and normal indices start at 1; negative ones count back)".into());
+    }
+    indices.iter().any(|&(i, n)| i.unsigned_abs() > n).then(|| {
+        format!(
+            "face (`f`) with an index out of range (the file has {} positions, {} texture coordinates, {} normals)",
+            counts[0], counts[1], counts[2]
+        )
+    })
 }
 
 /// Makes MTL text safe for tobj: `newmtl` with an empty name gets [`EMPTY_NAME`] (tobj rejects
