@@ -152,40 +152,19 @@ fn check_primitive_accessors(v: &::gltf::json::Value) -> Result<(), String> {
 }
 
 /// Buffer and image URIs that are not `data:` URIs must percent-decode to UTF-8: gltf 1.4.1
-/// unwraps the decoded path (a panic, found by fuzzing).
+/// unwraps `urlencoding::decode` of them (a panic, found by fuzzing); this is the same call.
 fn check_uris(v: &::gltf::json::Value) -> Result<(), String> {
     for (kind, list) in [("buffer", "buffers"), ("image", "images")] {
         for (i, item) in v.get(list).and_then(|l| l.as_array()).into_iter().flatten().enumerate() {
             if let Some(uri) = item.get("uri").and_then(|u| u.as_str())
                 && !uri.starts_with("data:")
-                && percent_decoded(uri).is_none()
+                && urlencoding::decode(uri).is_err()
             {
                 return Err(format!("{kind} {i}: its URI is not valid percent-encoded UTF-8"));
             }
         }
     }
     Ok(())
-}
-
-/// `%XX` sequences decoded (others kept as they are), if the result is UTF-8.
-fn percent_decoded(s: &str) -> Option<String> {
-    let b = s.as_bytes();
-    let hex = |c: u8| (c as char).to_digit(16);
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        match (b[i], b.get(i + 1).and_then(|&c| hex(c)), b.get(i + 2).and_then(|&c| hex(c))) {
-            (b'%', Some(h), Some(l)) => {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-            }
-            (c, _, _) => {
-                out.push(c);
-                i += 1;
-            }
-        }
-    }
-    String::from_utf8(out).ok()
 }
 
 /// External buffers and images (relative URIs, not `data:`) must be regular files within the
@@ -499,11 +478,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn uris_percent_decode_like_the_gltf_crate() {
-        assert_eq!(percent_decoded("a%20b.bin").as_deref(), Some("a b.bin"));
-        assert_eq!(percent_decoded("100%.bin").as_deref(), Some("100%.bin"), "a lone % stays");
-        assert_eq!(percent_decoded("%C3%A9.png").as_deref(), Some("é.png"));
-        assert_eq!(percent_decoded("%FF.bin"), None, "not UTF-8 once decoded");
+    fn uris_must_percent_decode_to_utf8() {
+        let doc = |uri: &str| {
+            ::gltf::json::serialize::to_value(::std::collections::BTreeMap::from([(
+                "buffers",
+                vec![::std::collections::BTreeMap::from([("uri", uri)])],
+            )]))
+            .unwrap()
+        };
+        for good in ["a%20b.bin", "100%.bin", "%C3%A9.png", "data:application/octet-stream;base64,%FF"] {
+            assert!(check_uris(&doc(good)).is_ok(), "{good}");
+        }
+        let e = check_uris(&doc("%FF.bin")).unwrap_err();
+        assert!(e.contains("buffer 0") && e.contains("UTF-8"), "{e}");
     }
 
     #[test]
