@@ -394,3 +394,23 @@ fn a_scene_at_the_documented_maxima_renders_or_is_refused_up_front() {
     std::fs::write(&scene, format!("{text}{}", sphere(4096))).unwrap();
     assert_bad_render(&[scene.to_str().unwrap(), "--backend", "cpu", "--max-memory", "1GiB"], &["maxima.toml", "sphere-2", "--max-memory"]);
 }
+
+/// Issue 22: a scene the GPU adapter cannot hold (a sphere tessellated into ~2M vertices, more
+/// than one storage binding of lavapipe's 128 MiB) is a clear error naming the scene and the
+/// adapter, exit 2, nothing written (it panicked with "Mismatched pop_error_scope" before).
+#[test]
+fn a_scene_too_large_for_the_gpu_adapter_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("huge-sphere.toml");
+    std::fs::write(
+        &scene,
+        "[camera]\nposition = [0.0, 0.0, 3.0]\ntarget = [0.0, 0.0, 0.0]\n\n[[material]]\nname = \"m\"\n\n\
+         [[light]]\ntype = \"directional\"\ndirection = [0.0, -1.0, -0.5]\n\n\
+         [[object]]\nprimitive = \"sphere\"\nmaterial = \"m\"\nslices = 1500\nstacks = 1500\n",
+    )
+    .unwrap();
+    assert_bad_render(
+        &[scene.to_str().unwrap(), "--backend", "gpu", "--size", "32x18"],
+        &["huge-sphere.toml", "does not fit the GPU adapter", "scene.vertices needs", "the device binds at most"],
+    );
+}
