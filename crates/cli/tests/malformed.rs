@@ -84,6 +84,7 @@ fn expected(name: &str) -> &'static str {
         "ply-coordinate-list.ply" => "list",
         "ply-binary-trailing.ply" => "byte(s)",
         "obj-texture-index-0.obj" => "index 0",
+        "texture-jpeg-frame-bomb.jpg" => "8212x3860",
         _ => "",
     }
 }

@@ -2,7 +2,9 @@
 """Regenerates the malformed-input corpus (one file per failure class of issue 22).
 Run from this folder: python3 generate.py. Each file is tiny; the test `malformed` in
 ../malformed.rs renders every one of them and expects exit 2, a message naming the file, and no
-output."""
+output.
+texture-jpeg-frame-bomb.jpg is not generated here: it is a fuzz find (fuzz/README.md), a 329-byte
+progressive JPEG declaring 8212x3860 pixels."""
 import base64, json, struct
 
 def gltf(name, *, accessors=None, views=None, nodes=None, attrs=None, indices=1, extra_bin=b"", mode=4):
