@@ -74,7 +74,7 @@ impl RtChoice {
             (_, None) => Ok(RtPath { hardware: true, why: "the adapter has ray queries".into() }),
             (Self::Auto, Some(why)) => Ok(RtPath { hardware: false, why }),
             (Self::Hardware, Some(why)) => {
-                Err(GpuError::Unsupported { adapter: ctx.summary.name.clone(), why: format!("--rt hw needs hardware ray tracing: {why}") })
+                Err(GpuError::Unsupported { adapter: ctx.summary.name.clone(), why: format!("no hardware ray tracing: {why}") })
             }
         }
     }
