@@ -226,7 +226,7 @@ pub struct CapsuleArgs {
     /// every sphere in view each frame. `bvh` traverses the sphere BVH per 8×8 tile (paper 2's
     /// way): its cost follows rays, not spheres, so it wins with many more spheres than pixels.
     /// `auto` (default) projects up to 2 points per pixel. The GPU backend always traverses
-    /// its BVH.
+    /// (its sphere BVH, or its acceleration structure: `--rt`).
     #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Auto)]
     pub capsule_visibility: CapsuleVisibilityChoice,
     /// Paper 2's behaviour: the point cloud only merges by depth, it casts no shadows on
