@@ -207,7 +207,8 @@ impl<'s> AnyRenderer<'s> {
                 AnyRenderer::Cpu(Box::new(r))
             }
             Backend::Gpu(ctx) => {
-                let mut r = GpuRenderer::with_rt(ctx.clone(), scene, options.rt).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
+                let mut r =
+                    GpuRenderer::with_rt(ctx.clone(), scene, options.rt).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
                 AnyRenderer::Gpu(Box::new(r))
@@ -241,7 +242,8 @@ pub fn check_rt(backend: &Backend, rt: RtChoice) -> Result<Option<String>, CliEr
         Backend::Cpu => Ok(None),
         Backend::Gpu(ctx) => {
             let path = rt.resolve(ctx).map_err(|e| CliError::bad_input(format!("--rt hw: {e}")))?;
-            let how = if path.hardware { "hardware (ray queries over acceleration structures)" } else { "software (BVH2 traversal in WGSL)" };
+            let how =
+                if path.hardware { "hardware (ray queries over acceleration structures)" } else { "software (BVH2 traversal in WGSL)" };
             let auto = if rt == RtChoice::Auto { "auto: " } else { "" };
             Ok(Some(format!("ray tracing: {how} ({auto}{})", path.why)))
         }

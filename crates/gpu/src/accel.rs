@@ -133,7 +133,11 @@ impl RtScene {
             })
             .collect();
         let blas_input = |label, contents: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage: wgpu::BufferUsages::BLAS_INPUT })
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::BLAS_INPUT,
+            })
         };
         let position_buffer = blas_input("rt.positions", bytemuck::cast_slice(&positions));
         let index_buffer = blas_input("rt.indices", bytemuck::cast_slice(if indices.is_empty() { &[0u32; 3][..] } else { &indices }));
@@ -167,7 +171,10 @@ impl RtScene {
                 continue;
             }
             if count > limits.max_blas_primitive_count {
-                return Err(too_large(format!("mesh {mesh} has {count} triangles, a BLAS holds at most {}", limits.max_blas_primitive_count)));
+                return Err(too_large(format!(
+                    "mesh {mesh} has {count} triangles, a BLAS holds at most {}",
+                    limits.max_blas_primitive_count
+                )));
             }
             let size = wgpu::BlasTriangleGeometrySizeDescriptor {
                 vertex_format: wgpu::VertexFormat::Float32x3,
@@ -180,7 +187,9 @@ impl RtScene {
         }
         let mesh_blases: Vec<wgpu::Blas> = sizes
             .iter()
-            .map(|(_, size)| device.create_blas(&blas_desc("rt.mesh"), wgpu::BlasGeometrySizeDescriptors::Triangles { descriptors: vec![size.clone()] }))
+            .map(|(_, size)| {
+                device.create_blas(&blas_desc("rt.mesh"), wgpu::BlasGeometrySizeDescriptors::Triangles { descriptors: vec![size.clone()] })
+            })
             .collect();
 
         let sphere_size = match &spheres.aabbs {
@@ -241,7 +250,8 @@ impl RtScene {
                 }]),
             });
         }
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("rt: build acceleration structures") });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("rt: build acceleration structures") });
         encoder.build_acceleration_structures(entries.iter(), [&tlas]);
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;

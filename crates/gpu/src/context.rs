@@ -176,7 +176,10 @@ pub fn ray_query_missing(adapter: &wgpu::Adapter) -> Option<String> {
         return Some("HYBRID_RAY_QUERY=off hides the adapter's ray queries".into());
     }
     if !adapter.features().contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY) {
-        return Some("the adapter has no ray queries (wgpu's EXPERIMENTAL_RAY_QUERY; on Vulkan VK_KHR_ray_query and VK_KHR_acceleration_structure)".into());
+        return Some(
+            "the adapter has no ray queries (wgpu's EXPERIMENTAL_RAY_QUERY; on Vulkan VK_KHR_ray_query and VK_KHR_acceleration_structure)"
+                .into(),
+        );
     }
     let l = adapter.limits();
     if l.max_bind_groups < 4 {

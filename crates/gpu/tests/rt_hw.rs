@@ -25,20 +25,35 @@ fn context() -> Arc<GpuContext> {
     Arc::new(ctx)
 }
 
+/// The beyond-the-papers switches (`--clip-capsule`, `--no-sphere-effects`).
+#[derive(Clone, Copy, Default)]
+struct Options {
+    clip_capsule: bool,
+    no_sphere_effects: bool,
+}
+
 /// One frame on `rt`, and the capsule's hit ids (scenes with point clouds).
-fn render(ctx: &Arc<GpuContext>, scene: &Scene, rt: RtChoice, settings: FrameSettings) -> (Frame, Option<Vec<u32>>, bool) {
+fn render(ctx: &Arc<GpuContext>, scene: &Scene, rt: RtChoice, settings: FrameSettings, o: Options) -> (Frame, Option<Vec<u32>>, bool) {
     let mut r = GpuRenderer::with_rt(ctx.clone(), scene, rt).unwrap_or_else(|e| panic!("{e}"));
+    r.clip_capsule_at_raster_depth = o.clip_capsule;
+    r.spheres_in_trace = !o.no_sphere_effects;
     let frame = r.render(&scene.camera, settings, &mut |_| {}).unwrap_or_else(|e| panic!("{e}"));
     let ids = r.capsule_hit_ids().map(|ids| ids.unwrap_or_else(|e| panic!("{e}")));
     (frame, ids, r.rt_path().hardware)
 }
 
 fn hardware_matches_software(name: &str, scene: &Scene, w: u32, h: u32) {
-    let ctx = context();
     for mode in [Mode::Hybrid, Mode::RtOnly] {
+        hardware_matches_software_with(name, scene, w, h, mode, Options::default());
+    }
+}
+
+fn hardware_matches_software_with(name: &str, scene: &Scene, w: u32, h: u32, mode: Mode, o: Options) {
+    let ctx = context();
+    {
         let settings = FrameSettings { width: w, height: h, mode };
-        let (sw, sw_ids, sw_hw) = render(&ctx, scene, RtChoice::Software, settings);
-        let (hw, hw_ids, hw_hw) = render(&ctx, scene, RtChoice::Hardware, settings);
+        let (sw, sw_ids, sw_hw) = render(&ctx, scene, RtChoice::Software, settings, o);
+        let (hw, hw_ids, hw_hw) = render(&ctx, scene, RtChoice::Hardware, settings, o);
         assert!(!sw_hw && hw_hw, "{name}: the renderers took the paths asked for");
         assert_eq!(hw.report.adapter.as_ref().map(|a| a.ray_tracing.as_str()), Some("hw"));
         assert_eq!(sw.report.adapter.as_ref().map(|a| a.ray_tracing.as_str()), Some("sw"));
@@ -84,6 +99,15 @@ fn demo_scene_hardware_matches_software() {
 fn tree_merge_hardware_matches_software() {
     let scene = load_scene(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/tree-merge.toml")).unwrap();
     hardware_matches_software("tree-merge", &scene, 160, 120);
+}
+
+/// The capsule clipped at the polygons' depth (its hardware variant too), and the trace stage
+/// without the spheres (the hardware variant bound to no spheres finds none).
+#[test]
+fn tree_merge_options_hardware_matches_software() {
+    let scene = load_scene(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/tree-merge.toml")).unwrap();
+    let o = Options { clip_capsule: true, no_sphere_effects: true };
+    hardware_matches_software_with("tree-merge clipped, no sphere effects", &scene, 160, 120, Mode::Hybrid, o);
 }
 
 #[test]

@@ -376,7 +376,9 @@ impl App {
                 eprintln!("ray tracing: {how} ({}{})", if self.options.rt == RtChoice::Auto { "auto: " } else { "" }, path.why);
             }
             None if self.options.rt == RtChoice::Hardware => {
-                return Err(ViewError::bad_input("--rt hw: the CPU backend has no hardware ray tracing (use --backend gpu, or --rt auto|sw)"));
+                return Err(ViewError::bad_input(
+                    "--rt hw: the CPU backend has no hardware ray tracing (use --backend gpu, or --rt auto|sw)",
+                ));
             }
             None => {}
         }
