@@ -275,12 +275,18 @@ impl SceneGpu {
         let first_level = scene.textures.len() as u32;
         for t in &scene.textures {
             dir.push([first_level + levels.len() as u32, t.levels.len() as u32, u32::from(t.color_space == ColorSpace::Srgb), 0]);
-            for l in &t.levels {
+            for (i, l) in t.levels.iter().enumerate() {
                 let n = l.texels.len() as u64;
+                // Rejected, not downscaled: a smaller texture here would make the GPU image differ
+                // from the CPU backend's, which reads the file's full resolution.
                 let page = (0..TEXEL_PAGES).find(|&p| pages[p].len() as u64 + n <= limit).ok_or_else(|| GpuError::TooLarge {
                     adapter: ctx.summary.name.clone(),
                     why: format!(
-                        "the scene's textures need more than {TEXEL_PAGES} storage buffers of {} MiB",
+                        "texture `{}` ({}x{}, mip level {i}: {} MiB) does not fit: the scene's textures need more than {TEXEL_PAGES} storage buffers of {} MiB",
+                        t.name,
+                        l.width,
+                        l.height,
+                        (n * 4) >> 20,
                         ctx.max_storage_binding() >> 20
                     ),
                 })?;

@@ -738,8 +738,9 @@ impl App {
 
     /// Runs script events until one asks for frames to pass. Returns false when it quit.
     fn run_script(&mut self, event_loop: &ActiveEventLoop) -> bool {
+        // `wait N` counts presented frames (decremented after `present`): a tick whose surface
+        // texture was outdated (as after a resize) shows nothing and does not count.
         if self.wait_frames > 0 {
-            self.wait_frames -= 1;
             return true;
         }
         if let Some(t) = self.wait_until {
@@ -761,7 +762,7 @@ impl App {
                 Event::Scroll(n) => self.fly.scroll(n),
                 Event::Wait(n) => {
                     if n > 0 {
-                        self.wait_frames = n - 1;
+                        self.wait_frames = n;
                         return true;
                     }
                 }
@@ -972,6 +973,7 @@ impl App {
         }
         let frame_ms = frame_start.elapsed().as_secs_f64() * 1e3;
         self.frames += 1;
+        self.wait_frames = self.wait_frames.saturating_sub(1);
         if need {
             self.rendered += 1;
             self.last_ms = frame_ms;

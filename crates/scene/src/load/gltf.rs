@@ -87,6 +87,28 @@ pub(super) fn load(path: &Path, materials: &mut Vec<Material>, textures: &mut Ve
     Ok(meshes)
 }
 
+/// The GLB header's version and total length, checked before gltf reads the container: gltf
+/// 1.4.1 subtracts the 12-byte header from the declared length unchecked (found by fuzzing: a
+/// length below 12 wraps in release builds and panics with overflow checks on).
+fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
+    const HEADER: usize = 12;
+    let word = |at: usize| bytes.get(at..at + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let (Some(version), Some(length)) = (word(4), word(8)) else {
+        return Err(format!("the file is {} bytes, shorter than the {HEADER}-byte GLB header", bytes.len()));
+    };
+    if version != 2 {
+        return Err(format!("GLB version {version} (only version 2 is supported)"));
+    }
+    let length = length as usize;
+    if length < HEADER + 8 {
+        return Err(format!("the header declares {length} bytes, too short for the header and a JSON chunk ({} bytes)", HEADER + 8));
+    }
+    if length > bytes.len() {
+        return Err(format!("the header declares {length} bytes, the file has {}", bytes.len()));
+    }
+    Ok(())
+}
+
 /// `gltf::import` with a JSON pre-pass: scenes without `nodes` (optional in the glTF schema,
 /// required by gltf-json) get an empty list, and extension objects of the wrong JSON type are
 /// rejected (gltf ignores extensions it was not built for, whatever their content).
@@ -94,6 +116,7 @@ fn import(path: &Path) -> Result<(::gltf::Document, Vec<::gltf::buffer::Data>, V
     let fail = |what: &str, e: &dyn std::fmt::Display| SceneError::new(path, format!("{what}: {e}"));
     let bytes = super::read_capped(path, "glTF file", super::MAX_MODEL_BYTES)?;
     let (json, blob) = if bytes.starts_with(b"glTF") {
+        check_glb_header(&bytes).map_err(|m| fail("invalid GLB container", &m))?;
         let glb = ::gltf::Glb::from_slice(&bytes).map_err(|e| fail("invalid GLB container", &e))?;
         (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
     } else {

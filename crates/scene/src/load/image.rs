@@ -13,7 +13,9 @@ pub(super) fn load(path: &Path, color_space: ColorSpace) -> Result<Texture, Scen
     let reader = reader.with_guessed_format().map_err(|e| SceneError::new(path, format!("cannot read texture: {e}")))?;
     match reader.format() {
         Some(::image::ImageFormat::Png) => {}
-        Some(::image::ImageFormat::Jpeg) => check_jpeg_complete(&bytes).map_err(|e| SceneError::new(path, e))?,
+        Some(::image::ImageFormat::Jpeg) => {
+            check_jpeg_complete(&bytes).and_then(|()| check_jpeg_data_covers_frame(&bytes)).map_err(|e| SceneError::new(path, e))?
+        }
         Some(f) => return Err(SceneError::new(path, format!("unsupported texture format {f:?} (expected PNG or JPEG)"))),
         None => return Err(SceneError::new(path, "not a PNG or JPEG image (unrecognised contents)")),
     }
@@ -43,6 +45,48 @@ pub(crate) fn check_jpeg_complete(bytes: &[u8]) -> Result<(), String> {
         Some(eoi) if eoi > sos => Ok(()),
         _ => Err("JPEG is truncated (its last scan has no end-of-image marker)".into()),
     }
+}
+
+/// A Huffman-coded JPEG (baseline, extended or progressive: what the decoder reads) codes every
+/// 8×8 block's DC coefficient with at least one bit, so its scans hold at least one bit per block
+/// of the frame. A file with less declares a frame its data cannot fill: the decoder would fill
+/// it with grey, taking seconds and hundreds of MiB for a few hundred bytes (found by fuzzing:
+/// 300-byte progressive JPEGs declaring 8212×3860 pixels). The check allows half that minimum.
+pub(crate) fn check_jpeg_data_covers_frame(bytes: &[u8]) -> Result<(), String> {
+    let u16_at = |i: usize| bytes.get(i..i + 2).map(|b| u16::from_be_bytes([b[0], b[1]]) as usize);
+    let mut frame = None;
+    let mut i = 2;
+    // Marker segments up to the first scan, skipping stray bytes between them as decoders do;
+    // a stream that ends first is left to the decoder.
+    let first_scan = loop {
+        let (Some(&byte), Some(&marker)) = (bytes.get(i), bytes.get(i + 1)) else { return Ok(()) };
+        if byte != 0xFF {
+            i += 1;
+            continue;
+        }
+        match marker {
+            0xFF => i += 1,
+            0x01 | 0xD0..=0xD8 => i += 2,
+            0xDA => break i,
+            _ => {
+                let Some(len) = u16_at(i + 2) else { return Ok(()) };
+                if matches!(marker, 0xC0..=0xC2) {
+                    frame = u16_at(i + 5).zip(u16_at(i + 7));
+                }
+                i += 2 + len;
+            }
+        }
+    };
+    let Some((height, width)) = frame else { return Ok(()) };
+    let blocks = width.div_ceil(8) as u64 * height.div_ceil(8) as u64;
+    let data_bits = (bytes.len() - first_scan) as u64 * 8;
+    if data_bits * 2 < blocks {
+        return Err(format!(
+            "JPEG declares {width}x{height} pixels ({blocks} blocks) but holds only {} bytes of image data: a valid file needs at least one bit per block",
+            bytes.len() - first_scan
+        ));
+    }
+    Ok(())
 }
 
 /// The texture's name: its file name.
@@ -81,6 +125,23 @@ mod tests {
         assert!(e.contains("truncated"), "{e}");
         assert!(check_jpeg_complete(&bytes[..bytes.len() / 2]).is_err());
         assert!(check_jpeg_complete(&bytes[..20]).is_err());
+    }
+
+    #[test]
+    fn jpeg_data_must_cover_its_frame() {
+        let img = ::image::RgbImage::from_pixel(256, 128, ::image::Rgb([90, 90, 90]));
+        let mut bytes = Vec::new();
+        ::image::DynamicImage::ImageRgb8(img).write_to(&mut std::io::Cursor::new(&mut bytes), ::image::ImageFormat::Jpeg).unwrap();
+        // Even a flat grey image spends more than a bit per block.
+        assert_eq!(check_jpeg_data_covers_frame(&bytes), Ok(()));
+        // The same data under a frame header claiming 16384x16384: 4M blocks from a few hundred bytes.
+        let sof = bytes.windows(2).position(|w| w == [0xFF, 0xC0]).unwrap();
+        bytes[sof + 5..sof + 9].copy_from_slice(&[0x40, 0x00, 0x40, 0x00]);
+        let e = check_jpeg_data_covers_frame(&bytes).unwrap_err();
+        assert!(e.contains("16384x16384") && e.contains("4194304 blocks"), "{e}");
+        // Malformed marker streams are left to the decoder.
+        assert_eq!(check_jpeg_data_covers_frame(&[0xFF, 0xD8, 0x12]), Ok(()));
+        assert_eq!(check_jpeg_data_covers_frame(&[0xFF, 0xD8, 0xFF, 0xC0, 0xFF]), Ok(()));
     }
 
     #[test]
