@@ -226,7 +226,7 @@ pub struct CapsuleArgs {
     /// every sphere in view each frame. `bvh` traverses the sphere BVH per 8×8 tile (paper 2's
     /// way): its cost follows rays, not spheres, so it wins with many more spheres than pixels.
     /// `auto` (default) projects up to 2 points per pixel. The GPU backend always traverses
-    /// its BVH.
+    /// (its sphere BVH, or its acceleration structure: `--rt`).
     #[arg(long, value_enum, default_value_t = CapsuleVisibilityChoice::Auto)]
     pub capsule_visibility: CapsuleVisibilityChoice,
     /// Paper 2's behaviour: the point cloud only merges by depth, it casts no shadows on
@@ -234,6 +234,31 @@ pub struct CapsuleArgs {
     /// of those effects.
     #[arg(long)]
     pub no_sphere_effects: bool,
+    /// GPU backend: how rays are traced. `hw`: hardware ray tracing (wgpu ray queries over
+    /// acceleration structures built once per scene: a BLAS per mesh, the point-cloud spheres as
+    /// AABB geometry); an adapter without ray queries is an error (exit 2), as is the CPU
+    /// backend. `sw`: the software BVH2 traversal in WGSL (every adapter). `auto` (default):
+    /// hardware where the adapter offers it, else software; says which.
+    #[arg(long, value_enum, default_value_t = RtArg::Auto)]
+    pub rt: RtArg,
+}
+
+/// `--rt`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RtArg {
+    Auto,
+    Hw,
+    Sw,
+}
+
+impl RtArg {
+    pub fn choice(self) -> hybrid_gpu::RtChoice {
+        match self {
+            RtArg::Auto => hybrid_gpu::RtChoice::Auto,
+            RtArg::Hw => hybrid_gpu::RtChoice::Hardware,
+            RtArg::Sw => hybrid_gpu::RtChoice::Software,
+        }
+    }
 }
 
 /// Heuristic overrides shared by `render` and `bench`.

@@ -7,7 +7,7 @@ use hybrid_core::memory;
 use hybrid_core::{Frame, FrameSettings, Mode, Stage};
 use hybrid_cpu::frame::CpuRenderer;
 use hybrid_gpu::frame::GpuRenderer;
-use hybrid_gpu::{AdapterChoice, GpuContext, GpuError};
+use hybrid_gpu::{AdapterChoice, GpuContext, GpuError, RtChoice};
 use hybrid_scene::{
     Camera, DEMO_SCENE_TOML, InputKind, MemoryLimit, Scene, demo_scene, input_kind, load_scene_or_model_within, model_scene_toml,
 };
@@ -90,6 +90,11 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     progress.stage("prepare");
     let file = args.scene.as_ref().map_or("demo scene".to_string(), |p| p.display().to_string());
     let options = RenderOptions::from(&args.capsule);
+    if let Some(line) = check_rt(&backend, options.rt)?
+        && !args.quiet
+    {
+        eprintln!("{line}");
+    }
     let mut renderer = match AnyRenderer::new(&backend, &scene, &file, options) {
         // `--backend auto`: a GPU that refuses the scene (too large, out of memory) is not the
         // end: the CPU backend renders it, saying so.
@@ -169,11 +174,18 @@ pub struct RenderOptions {
     pub sphere_effects: bool,
     /// `--capsule-visibility` (CPU backend).
     pub capsule_visibility: CapsuleVisibilityChoice,
+    /// `--rt` (GPU backend).
+    pub rt: RtChoice,
 }
 
 impl From<&CapsuleArgs> for RenderOptions {
     fn from(a: &CapsuleArgs) -> Self {
-        Self { clip_capsule: a.clip_capsule, sphere_effects: !a.no_sphere_effects, capsule_visibility: a.capsule_visibility }
+        Self {
+            clip_capsule: a.clip_capsule,
+            sphere_effects: !a.no_sphere_effects,
+            capsule_visibility: a.capsule_visibility,
+            rt: a.rt.choice(),
+        }
     }
 }
 
@@ -195,7 +207,8 @@ impl<'s> AnyRenderer<'s> {
                 AnyRenderer::Cpu(Box::new(r))
             }
             Backend::Gpu(ctx) => {
-                let mut r = GpuRenderer::new(ctx.clone(), scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
+                let mut r =
+                    GpuRenderer::with_rt(ctx.clone(), scene, options.rt).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
                 AnyRenderer::Gpu(Box::new(r))
@@ -215,6 +228,24 @@ impl<'s> AnyRenderer<'s> {
     pub fn recycle(&mut self, frame: Frame) {
         if let AnyRenderer::Cpu(r) = self {
             r.recycle(frame);
+        }
+    }
+}
+
+/// `--rt` against the backend: `hw` needs the GPU backend on an adapter with ray queries (else
+/// exit 2, naming the flag). Returns the line saying which traversal traces (GPU backend).
+pub fn check_rt(backend: &Backend, rt: RtChoice) -> Result<Option<String>, CliError> {
+    match backend {
+        Backend::Cpu if rt == RtChoice::Hardware => {
+            Err(CliError::bad_input("--rt hw: the CPU backend has no hardware ray tracing (use --backend gpu, or --rt auto|sw)"))
+        }
+        Backend::Cpu => Ok(None),
+        Backend::Gpu(ctx) => {
+            let path = rt.resolve(ctx).map_err(|e| CliError::bad_input(format!("--rt hw: {e}")))?;
+            let how =
+                if path.hardware { "hardware (ray queries over acceleration structures)" } else { "software (BVH2 traversal in WGSL)" };
+            let auto = if rt == RtChoice::Auto { "auto: " } else { "" };
+            Ok(Some(format!("ray tracing: {how} ({auto}{})", path.why)))
         }
     }
 }

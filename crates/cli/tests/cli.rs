@@ -395,6 +395,53 @@ fn a_scene_at_the_documented_maxima_renders_or_is_refused_up_front() {
     assert_bad_render(&[scene.to_str().unwrap(), "--backend", "cpu", "--max-memory", "1GiB"], &["maxima.toml", "sphere-2", "--max-memory"]);
 }
 
+/// Issue 19: `--rt auto` (the default) traces in hardware on an adapter with ray queries (Mesa
+/// 25's lavapipe in CI), says so and reports it with the acceleration structures' build time;
+/// with the feature hidden (`HYBRID_RAY_QUERY=off`) it falls back to software, saying why.
+#[test]
+fn rt_auto_says_and_reports_which_path_traced() {
+    let dir = tempfile::tempdir().unwrap();
+    for (hide, path) in [(false, "hw"), (true, "sw")] {
+        let out = dir.path().join(format!("{path}.png"));
+        let report = dir.path().join(format!("{path}.json"));
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_hybrid"));
+        cmd.args(["render", "--backend", "gpu", "--size", "64x36", "-o", out.to_str().unwrap(), "--report", report.to_str().unwrap()]);
+        if hide {
+            cmd.env("HYBRID_RAY_QUERY", "off");
+        }
+        let o = cmd.output().expect("run hybrid");
+        assert!(o.status.success(), "{}", stderr(&o));
+        let said = if hide { "ray tracing: software" } else { "ray tracing: hardware" };
+        assert!(stderr(&o).contains(said) && stderr(&o).contains("(auto: "), "{}", stderr(&o));
+        let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        assert_eq!(json["adapter"]["ray_tracing"], path, "{json}");
+        let build = &json["gpu_timings_ms"]["build_as"];
+        assert_eq!(build.as_f64().is_some_and(|ms| ms > 0.0), !hide, "build_as: {json}");
+    }
+}
+
+/// Issue 19: `--rt hw` on an adapter without ray queries (hidden with `HYBRID_RAY_QUERY=off`), or
+/// on the CPU backend, is a clear error naming the flag (exit 2) and writes nothing.
+#[test]
+fn rt_hw_without_ray_queries_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_hybrid"))
+        .args(["render", "--quiet", "--backend", "gpu", "--rt", "hw", "--size", "32x18", "-o", out.to_str().unwrap()])
+        .env("HYBRID_RAY_QUERY", "off")
+        .output()
+        .expect("run hybrid");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--rt hw") && stderr(&o).contains("no hardware ray tracing"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+    let o = hybrid(&["render", "--quiet", "--backend", "cpu", "--rt", "hw", "--size", "32x18", "-o", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--rt hw: the CPU backend"), "{}", stderr(&o));
+    let o = hybrid(&["render", "--quiet", "--rt", "rtx", "--size", "32x18", "-o", out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(files_in(dir.path()).is_empty(), "{:?}", files_in(dir.path()));
+}
+
 /// Issue 22: a scene the GPU adapter cannot hold (a sphere tessellated into ~2M vertices, more
 /// than one storage binding of lavapipe's 128 MiB) is a clear error naming the scene and the
 /// adapter, exit 2, nothing written (it panicked with "Mismatched pop_error_scope" before).

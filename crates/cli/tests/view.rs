@@ -347,3 +347,29 @@ fn clicking_the_overlay_budget_changes_the_selection() {
     assert!(!reported.is_empty() && reported.len() < objects.len(), "{reported:?} of {}", objects.len());
     assert!(h["spent"].as_f64().unwrap() <= h["budget"].as_f64().unwrap(), "{h}");
 }
+
+/// Issue 19: the viewer's `--rt hw` traces in hardware where the adapter has ray queries (Mesa
+/// 25's lavapipe in CI; the screenshot's report says which path traced); with the feature hidden
+/// (`HYBRID_RAY_QUERY=off`) it is one clear error naming the flag, exit 2.
+#[test]
+fn rt_hw_in_the_viewer() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    let args = [scene.to_str().unwrap(), "--backend", "gpu", "--rt", "hw", "--size", "64x48"];
+    view(dir.path(), &args, "wait 2\nscreenshot shot.png\nquit\n");
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.path().join("shot.json")).unwrap()).unwrap();
+    assert_eq!(report["adapter"]["ray_tracing"], "hw", "{report}");
+
+    let runtime = dir.path().join("xdg");
+    let o = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x1024x24", env!("CARGO_BIN_EXE_hybrid"), "view"])
+        .args(args)
+        .env("XDG_RUNTIME_DIR", &runtime)
+        .env("HYBRID_RAY_QUERY", "off")
+        .output()
+        .expect("xvfb-run");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("--rt hw") && err.contains("no hardware ray tracing"), "{err}");
+    assert_eq!(err.matches("error:").count(), 1, "{err}");
+}

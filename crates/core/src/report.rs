@@ -17,6 +17,11 @@ pub struct StageTimings {
     pub trace: f64,
     pub blend: f64,
     pub frame: f64,
+    /// GPU backend, hardware ray tracing only: building the acceleration structures (once per
+    /// scene, wall-clock ms of the build's submission; reported on every frame like the capsule's
+    /// `build_ms`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub build_as: Option<f64>,
 }
 
 /// Rays traced in one frame, by kind.
@@ -86,4 +91,7 @@ pub struct AdapterReport {
     /// "discrete-gpu", "integrated-gpu", "virtual-gpu", "cpu" (software, e.g. lavapipe) or "other".
     pub device_type: String,
     pub driver: String,
+    /// Which traversal traced the frame's rays: "hw" (ray queries over acceleration structures)
+    /// or "sw" (the BVH2 traversal in WGSL).
+    pub ray_tracing: String,
 }

@@ -15,11 +15,12 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use hybrid_core::Stage;
 use hybrid_core::report::CapsuleReport;
 
+use crate::accel::{RQ_WGSL, RtScene};
 use crate::context::{GpuContext, GpuError};
 use crate::readback::read_buffer;
 use crate::scene::SceneGpu;
 use crate::shaders;
-use crate::spheres::{SPHERES_WGSL, SpheresGpu};
+use crate::spheres::{SPHERES_RQ_WGSL, SPHERES_WGSL, SpheresGpu};
 use crate::targets::{FrameTargets, PACKED_FORMAT, begin_gbuffer_pass, gbuffer_pipeline};
 use crate::timing::StageTimer;
 
@@ -37,6 +38,8 @@ pub fn capsule_source() -> String {
 /// Stage 0 (blocks D + P) and block U on the GPU.
 pub struct GpuCapsule {
     device: wgpu::Device,
+    /// Group 3 of the hardware variant; `None`: the software sphere BVH.
+    rt: Option<wgpu::BindGroup>,
     trace_pipeline: wgpu::ComputePipeline,
     /// The same pass with rays stopped at the polygon depth (`CLIP = true`).
     clipped_pipeline: wgpu::ComputePipeline,
@@ -53,6 +56,12 @@ pub struct GpuCapsule {
 
 impl GpuCapsule {
     pub fn new(ctx: &GpuContext, scene: &SceneGpu, spheres: &SpheresGpu) -> Self {
+        Self::new_rt(ctx, scene, spheres, None)
+    }
+
+    /// As [`GpuCapsule::new`]; with `rt`, the hardware variant: the spheres are found by ray
+    /// queries over `rt`'s AABB geometry (group 3), hit by the same sphere test.
+    pub fn new_rt(ctx: &GpuContext, scene: &SceneGpu, spheres: &SpheresGpu, rt: Option<&RtScene>) -> Self {
         let device = &ctx.device;
         let trace_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("capsule.targets"),
@@ -90,10 +99,13 @@ impl GpuCapsule {
                 },
             ],
         });
-        let module = shaders::module(device, "capsule", &capsule_source());
+        let module = match rt {
+            None => shaders::module(device, "capsule", &capsule_source()),
+            Some(_) => shaders::module_rq(device, "capsule.hw", &format!("{RQ_WGSL}\n{SPHERES_RQ_WGSL}\n{CAPSULE_WGSL}")),
+        };
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("capsule"),
-            bind_group_layouts: &[Some(&scene.layout), Some(&trace_layout), Some(&spheres.layout)],
+            bind_group_layouts: &[Some(&scene.layout), Some(&trace_layout), Some(&spheres.layout), rt.map(|rt| &rt.layout)],
             immediate_size: 0,
         });
         let pipeline = |label: &str, clip: f64| {
@@ -132,6 +144,7 @@ impl GpuCapsule {
         let points = spheres.count as u64;
         Self {
             device: device.clone(),
+            rt: rt.map(|rt| rt.bind_group.clone()),
             trace_pipeline,
             clipped_pipeline,
             trace_layout,
@@ -192,6 +205,9 @@ impl GpuCapsule {
         pass.set_bind_group(0, &scene.bind_group, &[]);
         pass.set_bind_group(1, &bind_group, &[]);
         pass.set_bind_group(2, &spheres.bind_group, &[]);
+        if let Some(rt) = &self.rt {
+            pass.set_bind_group(3, rt, &[]);
+        }
         pass.dispatch_workgroups(targets.width.div_ceil(8), targets.height.div_ceil(8), 1);
     }
 

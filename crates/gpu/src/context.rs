@@ -60,6 +60,10 @@ pub struct GpuContext {
     pub summary: AdapterSummary,
     /// Timestamp queries at pass boundaries are available (per-stage GPU times).
     pub timestamps: bool,
+    /// The adapter offers wgpu's ray queries with acceleration structures
+    /// (`EXPERIMENTAL_RAY_QUERY`, e.g. Vulkan's VK_KHR_ray_query): the device was opened with them
+    /// and the trace can run in hardware (`crate::accel`).
+    pub ray_query: bool,
 }
 
 impl GpuContext {
@@ -106,15 +110,30 @@ impl GpuContext {
             driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
         };
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let ray_query = ray_query_missing(&adapter).is_none();
         let mut required_features = wgpu::Features::empty();
         if timestamps {
             required_features |= wgpu::Features::TIMESTAMP_QUERY;
         }
-        let desc =
-            wgpu::DeviceDescriptor { label: Some("hybrid"), required_features, required_limits: adapter.limits(), ..Default::default() };
+        let mut experimental_features = wgpu::ExperimentalFeatures::disabled();
+        if ray_query {
+            required_features |= wgpu::Features::EXPERIMENTAL_RAY_QUERY;
+            // SAFETY: interop point with wgpu's experimental ray-query API: wgpu asks the caller
+            // to acknowledge that its experimental features may still have bugs. Only requested
+            // where the adapter offers ray queries; the hardware-path pipelines (separate
+            // variants) are the only users, and the software path never touches them.
+            experimental_features = unsafe { wgpu::ExperimentalFeatures::enabled() };
+        }
+        let desc = wgpu::DeviceDescriptor {
+            label: Some("hybrid"),
+            required_features,
+            required_limits: adapter.limits(),
+            experimental_features,
+            ..Default::default()
+        };
         let (device, queue) = pollster::block_on(adapter.request_device(&desc))
             .map_err(|source| GpuError::RequestDevice { adapter: summary.name.clone(), source })?;
-        Ok(Self { instance, adapter, device, queue, summary, timestamps })
+        Ok(Self { instance, adapter, device, queue, summary, timestamps, ray_query })
     }
 
     /// Waits until the GPU has finished everything submitted so far.
@@ -145,6 +164,31 @@ impl GpuContext {
     pub fn max_storage_binding(&self) -> u64 {
         self.device.limits().max_storage_buffer_binding_size
     }
+}
+
+/// Why `adapter` cannot trace in hardware (`None` when it can): it needs wgpu's ray queries
+/// (`EXPERIMENTAL_RAY_QUERY`: acceleration structures and `ray_query` in WGSL) and a fourth bind
+/// group (the hardware-path pipelines bind the acceleration structure at group 3).
+/// `HYBRID_RAY_QUERY=off` hides the feature (the device is opened without it), so the fallback and
+/// `--rt hw`'s error can be seen on an adapter that has it.
+pub fn ray_query_missing(adapter: &wgpu::Adapter) -> Option<String> {
+    if std::env::var("HYBRID_RAY_QUERY").is_ok_and(|v| v == "off") {
+        return Some("HYBRID_RAY_QUERY=off hides the adapter's ray queries".into());
+    }
+    if !adapter.features().contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY) {
+        return Some(
+            "the adapter has no ray queries (wgpu's EXPERIMENTAL_RAY_QUERY; on Vulkan VK_KHR_ray_query and VK_KHR_acceleration_structure)"
+                .into(),
+        );
+    }
+    let l = adapter.limits();
+    if l.max_bind_groups < 4 {
+        return Some(format!("bind groups: {}, the hardware path needs 4", l.max_bind_groups));
+    }
+    if l.max_acceleration_structures_per_shader_stage < 1 {
+        return Some("no acceleration structure may be bound to a shader stage".into());
+    }
+    None
 }
 
 /// What the passes need beyond wgpu's defaults: compute shaders, the G-buffer's 8 colour targets

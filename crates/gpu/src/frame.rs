@@ -12,7 +12,9 @@ use hybrid_core::{Frame, FrameSettings, Mode, PreparedScene, Stage};
 use hybrid_heuristic::{Heuristic, HeuristicReport};
 use hybrid_scene::{Camera, Scene};
 
+use crate::accel::{RtChoice, RtPath, RtScene};
 use crate::blend::BlendPass;
+use crate::bvh::TriangleBvhGpu;
 use crate::capsule::GpuCapsule;
 use crate::context::{GpuContext, GpuError};
 use crate::heuristic::{HeuristicPasses, MaskSelection};
@@ -48,6 +50,12 @@ pub struct GpuRenderer<'s> {
     timer: StageTimer,
     /// Host milliseconds spent building and uploading the scene (BVHs included).
     pub prepare_ms: f64,
+    /// Hardware or software traversal, and why (`--rt`).
+    rt_path: RtPath,
+    /// The acceleration structures' build time (hardware path).
+    build_as_ms: Option<f64>,
+    /// The acceleration structures (hardware path), kept alive for the passes' group 3.
+    _rt_scene: Option<RtScene>,
     /// Beyond paper 2: the point-cloud spheres cast shadows on polygons and appear in
     /// reflections and refractions (default on). Off gives the paper's behaviour (the RT-scene
     /// only merges by depth): a faster trace stage, at the cost of those effects.
@@ -60,35 +68,50 @@ pub struct GpuRenderer<'s> {
 
 impl<'s> GpuRenderer<'s> {
     /// Uploads `scene` once: vertices, materials, textures, lights, the triangle BVH and the
-    /// point clouds' sphere BVH, and builds every stage's pipeline.
+    /// point clouds' sphere BVH, and builds every stage's pipeline. Traces with the software
+    /// traversal ([`RtChoice::Software`]; [`GpuRenderer::with_rt`] chooses).
     pub fn new(ctx: Arc<GpuContext>, scene: &'s Scene) -> Result<Self, GpuError> {
+        Self::with_rt(ctx, scene, RtChoice::Software)
+    }
+
+    /// As [`GpuRenderer::new`], tracing in hardware or software as `rt` and the adapter say
+    /// (`--rt`): the hardware path also builds the acceleration structures (`crate::accel`).
+    /// `RtChoice::Hardware` on an adapter without ray queries fails with `GpuError::Unsupported`.
+    pub fn with_rt(ctx: Arc<GpuContext>, scene: &'s Scene, rt: RtChoice) -> Result<Self, GpuError> {
+        let rt_path = rt.resolve(&ctx)?;
         // wgpu reports invalid use and exhausted memory asynchronously (by default with a panic):
         // capture both while the scene is uploaded and the pipelines built, and return them.
         let scope = ErrorScope::push(&ctx.device);
         // Pop the scopes whatever `build` returned (an early return used to drop them in the wrong
         // order: "Mismatched pop_error_scope call"); a captured device error explains an early
         // failure better than the failure itself, so it wins.
-        let built = Self::build(ctx.clone(), scene);
+        let built = Self::build(ctx.clone(), scene, rt_path);
         let popped = scope.pop(&ctx);
         popped.and(built)
     }
 
-    fn build(ctx: Arc<GpuContext>, scene: &'s Scene) -> Result<Self, GpuError> {
+    fn build(ctx: Arc<GpuContext>, scene: &'s Scene, rt_path: RtPath) -> Result<Self, GpuError> {
         let start = Instant::now();
         let prepared = PreparedScene::new(scene);
         let gpu_scene = SceneGpu::new(&ctx, &prepared)?;
         let spheres = if scene.point_clouds.is_empty() { SpheresGpu::empty(&ctx) } else { SpheresGpu::new(&ctx, &scene.point_clouds)? };
-        let capsule = (!scene.point_clouds.is_empty()).then(|| GpuCapsule::new(&ctx, &gpu_scene, &spheres));
+        let rt_scene = if rt_path.hardware { Some(RtScene::new(&ctx, &gpu_scene, &prepared, &spheres)?) } else { None };
+        let rt = rt_scene.as_ref();
+        let capsule = (!scene.point_clouds.is_empty()).then(|| GpuCapsule::new_rt(&ctx, &gpu_scene, &spheres, rt));
         let no_spheres = SpheresGpu::empty(&ctx);
-        let trace = TracePasses::new(&ctx, &gpu_scene, &prepared, &spheres)?;
+        let bvh = Arc::new(TriangleBvhGpu::new(&ctx, &gpu_scene, &prepared)?);
+        let trace = TracePasses::with_bvh_rt(&ctx, &gpu_scene, &prepared, bvh, &spheres, rt)?;
         let trace_without_spheres = if scene.point_clouds.is_empty() {
             None
         } else {
-            Some(TracePasses::with_bvh(&ctx, &gpu_scene, &prepared, trace.shared_bvh(), &no_spheres)?)
+            Some(TracePasses::with_bvh_rt(&ctx, &gpu_scene, &prepared, trace.shared_bvh(), &no_spheres, rt)?)
         };
         Ok(Self {
             raster: RasterPass::new(&ctx, &gpu_scene),
-            primary: PrimaryPass::new(&ctx, &gpu_scene, trace.bvh()),
+            primary: PrimaryPass::new_rt(&ctx, &gpu_scene, trace.bvh(), rt),
+            build_as_ms: rt_scene.as_ref().map(|r| r.build_ms),
+            rt_path,
+            _rt_scene: rt_scene,
             lighting: LightingPass::new(&ctx, &gpu_scene),
             heuristic_passes: HeuristicPasses::new(&ctx, scene.objects.len() as u32),
             blend: BlendPass::new(&ctx),
@@ -107,6 +130,17 @@ impl<'s> GpuRenderer<'s> {
             scene,
             ctx,
         })
+    }
+
+    /// Per pixel of the last frame, the global id of the sphere the capsule hit (`u32::MAX`: miss);
+    /// `None` without point clouds. Waits for the GPU.
+    pub fn capsule_hit_ids(&self) -> Option<Result<Vec<u32>, GpuError>> {
+        self.capsule.as_ref().map(|c| c.read_hit_ids(&self.ctx))
+    }
+
+    /// Which traversal traces this renderer's rays, and why.
+    pub fn rt_path(&self) -> &RtPath {
+        &self.rt_path
     }
 
     pub fn context(&self) -> &GpuContext {
@@ -255,6 +289,7 @@ impl<'s> GpuRenderer<'s> {
         // Host-side stage times: GPU times where timestamps exist (the passes run back to back
         // inside two submissions, so host time per stage is not observable); the heuristic's
         // entry is its host part (read-back, selection) plus its GPU passes.
+        let gpu_timings = gpu_timings.map(|g| StageTimings { build_as: self.build_as_ms, ..g });
         let mut timings = gpu_timings.unwrap_or(StageTimings { trace: second_ms, ..Default::default() });
         timings.heuristic += heuristic_host_ms;
         self.heuristic.record_trace(mode, heuristic_report.as_ref(), timings[Stage::Trace]);
@@ -280,6 +315,7 @@ impl<'s> GpuRenderer<'s> {
                 backend: s.backend.clone(),
                 device_type: s.device_type.clone(),
                 driver: s.driver.clone(),
+                ray_tracing: self.rt_path.name().into(),
             }),
         };
         Ok((report, wall))

@@ -3,6 +3,7 @@
 //! Mesa's lavapipe in CI) that can hold the frame's targets: OpenGL adapters are refused (see
 //! `context`). The CPU backend is its oracle in tests.
 
+pub mod accel;
 pub mod blend;
 pub mod bvh;
 pub mod capsule;
@@ -22,4 +23,5 @@ pub mod targets;
 pub mod timing;
 pub mod trace;
 
+pub use accel::{RtChoice, RtPath};
 pub use context::{AdapterChoice, AdapterSummary, GpuContext, GpuError};

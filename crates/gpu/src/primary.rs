@@ -7,6 +7,7 @@
 
 use hybrid_core::Stage;
 
+use crate::accel::{RQ_WGSL, RtScene};
 use crate::bvh::{BVH_WGSL, TriangleBvhGpu};
 use crate::context::GpuContext;
 use crate::scene::SceneGpu;
@@ -21,10 +22,18 @@ pub const PRIMARY_WGSL: &str = include_str!("shaders/primary.wgsl");
 pub struct PrimaryPass {
     pipeline: wgpu::RenderPipeline,
     bind_group: wgpu::BindGroup,
+    /// Group 3 of the hardware variant.
+    rt: Option<wgpu::BindGroup>,
 }
 
 impl PrimaryPass {
     pub fn new(ctx: &GpuContext, scene: &SceneGpu, bvh: &TriangleBvhGpu) -> Self {
+        Self::new_rt(ctx, scene, bvh, None)
+    }
+
+    /// As [`PrimaryPass::new`]; with `rt`, the hardware variant (ray queries over `rt`'s
+    /// acceleration structure, group 3; the BVH stays bound, unread).
+    pub fn new_rt(ctx: &GpuContext, scene: &SceneGpu, bvh: &TriangleBvhGpu, rt: Option<&RtScene>) -> Self {
         let device = &ctx.device;
         let entries = TriangleBvhGpu::layout_entries(wgpu::ShaderStages::FRAGMENT);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("primary"), entries: &entries });
@@ -32,12 +41,15 @@ impl PrimaryPass {
             device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("primary"), layout: &layout, entries: &bvh.bind_entries() });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("primary"),
-            bind_group_layouts: &[Some(&scene.layout), Some(&layout)],
+            bind_group_layouts: &[Some(&scene.layout), Some(&layout), None, rt.map(|rt| &rt.layout)],
             immediate_size: 0,
         });
-        let module = shaders::module(device, "primary", &format!("{BVH_WGSL}\n{PRIMARY_WGSL}"));
+        let module = match rt {
+            None => shaders::module(device, "primary", &format!("{BVH_WGSL}\n{PRIMARY_WGSL}")),
+            Some(_) => shaders::module_rq(device, "primary.hw", &format!("{RQ_WGSL}\n{PRIMARY_WGSL}")),
+        };
         let pipeline = gbuffer_pipeline(device, "primary", &pipeline_layout, &module, "primary_vs", "primary_fs");
-        Self { pipeline, bind_group }
+        Self { pipeline, bind_group, rt: rt.map(|rt| rt.bind_group.clone()) }
     }
 
     /// The G-buffer (8 colour targets + depth) of `targets` from primary rays. `clear`: clear
@@ -55,6 +67,9 @@ impl PrimaryPass {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &scene.bind_group, &[]);
         pass.set_bind_group(1, &self.bind_group, &[]);
+        if let Some(rt) = &self.rt {
+            pass.set_bind_group(3, rt, &[]);
+        }
         pass.draw(0..3, 0..1);
     }
 }

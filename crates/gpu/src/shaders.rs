@@ -43,6 +43,9 @@ pub fn constants() -> String {
         ("TRACE_STACK", crate::trace::TRACE_STACK),
         ("TRACE_RAY_BUDGET", hybrid_scene::TRACE_RAY_BUDGET),
         ("SPAN", crate::heuristic::COUNT_SPAN),
+        ("RT_MASK_SHADOW_CASTERS", crate::accel::RT_MASK_SHADOW_CASTERS),
+        ("RT_MASK_SPHERES", crate::accel::RT_MASK_SPHERES),
+        ("RT_MASK_TRIANGLES", crate::accel::RT_MASK_TRIANGLES),
     ];
     // The sky kind is an i32 in WGSL (compared with a signed uniform field).
     let i32s = [("SKY_COLOR", SKY_COLOR), ("SKY_GRADIENT", SKY_GRADIENT), ("SKY_CUBE", SKY_CUBE)];
@@ -60,6 +63,20 @@ pub fn constants() -> String {
         out += &format!("const {name}: f32 = {v:?};\n");
     }
     out
+}
+
+/// Compiles a hardware-path variant of a pass's shader: `enable wgpu_ray_query;` (WGSL wants it
+/// before everything), then as [`module`]. Only built on devices with ray queries.
+pub fn module_rq(device: &wgpu::Device, label: &str, pass_source: &str) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(with_common_rq(pass_source).into()),
+    })
+}
+
+/// `enable wgpu_ray_query;`, then [`with_common`].
+pub fn with_common_rq(pass_source: &str) -> String {
+    format!("enable wgpu_ray_query;\n{}", with_common(pass_source))
 }
 
 /// Compiles a pass's shader (common/*.wgsl prepended).
@@ -114,6 +131,8 @@ fn probe() {
             ("mask.wgsl", crate::heuristic::MASK_WGSL),
             ("spheres.wgsl", crate::spheres::SPHERES_WGSL),
             ("trace.wgsl", crate::trace::TRACE_WGSL),
+            ("rq.wgsl + bvh_rq.wgsl", crate::accel::RQ_WGSL),
+            ("spheres_rq.wgsl", crate::spheres::SPHERES_RQ_WGSL),
         ];
         let names: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("const ")).map(|l| l.split(':').next().unwrap()).collect();
         assert!(names.len() >= 18, "{header}");

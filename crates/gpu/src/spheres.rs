@@ -22,8 +22,12 @@ use wgpu::util::DeviceExt;
 
 use crate::context::{GpuContext, GpuError};
 
-/// The WGSL of group 2 (include it after common/*.wgsl: `shaders::with_common(&format!("{SPHERES_WGSL}\n{pass}"))`).
-pub const SPHERES_WGSL: &str = include_str!("shaders/spheres.wgsl");
+/// The WGSL of group 2 with the software traversal (include it after common/*.wgsl:
+/// `shaders::with_common(&format!("{SPHERES_WGSL}\n{pass}"))`).
+pub const SPHERES_WGSL: &str = concat!(include_str!("shaders/spheres.wgsl"), include_str!("shaders/spheres_bvh.wgsl"));
+
+/// The WGSL of group 2 with the hardware traversal (after common/*.wgsl and `accel::RQ_WGSL`).
+pub const SPHERES_RQ_WGSL: &str = concat!(include_str!("shaders/spheres.wgsl"), include_str!("shaders/spheres_rq.wgsl"));
 
 /// Traversal stack entries in spheres.wgsl (`SPHERE_STACK`); the tree's depth must stay below it.
 pub const STACK: u32 = 64;
@@ -78,6 +82,26 @@ pub struct SpheresGpu {
     pub build_ms: f64,
     /// Bytes uploaded (nodes, spheres, ids, clouds).
     pub bytes: u64,
+    /// Where the device has ray queries: each sphere's box in slot order (min xyz, max xyz, padded
+    /// by [`AABB_PAD`]), the AABB geometry of the hardware path's acceleration structure.
+    pub aabbs: Option<wgpu::Buffer>,
+}
+
+/// Relative padding of the spheres' boxes in the acceleration structure (of radius + |centre|):
+/// the hardware's box test may cull a ray that only grazes a box; a padded box only adds
+/// candidates, which the exact sphere test then refuses.
+pub const AABB_PAD: f32 = 1e-4;
+
+/// The spheres' padded boxes in slot order, six floats each (what `SpheresGpu::aabbs` holds).
+pub fn sphere_boxes(spheres: &[GpuSphere]) -> Vec<[f32; 6]> {
+    spheres
+        .iter()
+        .map(|s| {
+            let c = s.center;
+            let pad = s.radius + AABB_PAD * (s.radius + c[0].abs().max(c[1].abs()).max(c[2].abs()));
+            [c[0] - pad, c[1] - pad, c[2] - pad, c[0] + pad, c[1] + pad, c[2] + pad]
+        })
+        .collect()
 }
 
 /// The spheres in leaf order with their global ids, the flattened BVH, and per-cloud constants:
@@ -209,7 +233,15 @@ impl SpheresGpu {
             + std::mem::size_of_val(data.spheres.as_slice())
             + std::mem::size_of_val(data.ids.as_slice())
             + std::mem::size_of_val(data.clouds.as_slice())) as u64;
+        let aabbs = (ctx.ray_query && !data.spheres.is_empty()).then(|| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("spheres.aabbs"),
+                contents: bytemuck::cast_slice(&sphere_boxes(&data.spheres)),
+                usage: wgpu::BufferUsages::BLAS_INPUT,
+            })
+        });
         Ok(Self {
+            aabbs,
             layout,
             bind_group,
             count: info_value.count,

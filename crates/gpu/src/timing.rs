@@ -137,6 +137,7 @@ fn stage_times(passes: &[Stage], ticks: &[u64], period_ns: f32) -> StageTimings 
         trace: span(&[Stage::Trace]),
         blend: span(&[Stage::Blend]),
         frame: span(&[]),
+        build_as: None,
     }
 }
 

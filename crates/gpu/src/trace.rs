@@ -15,12 +15,13 @@ use hybrid_core::Stage;
 use hybrid_core::report::RayCounts;
 use wgpu::util::DeviceExt;
 
+use crate::accel::{RQ_WGSL, RtScene};
 use crate::bvh::{BVH_WGSL, TriangleBvhGpu};
 use crate::context::{GpuContext, GpuError};
 use crate::readback::read_buffer;
 use crate::scene::SceneGpu;
 use crate::shaders;
-use crate::spheres::{SPHERES_WGSL, SpheresGpu};
+use crate::spheres::{SPHERES_RQ_WGSL, SPHERES_WGSL, SpheresGpu};
 use crate::targets::{COLOR_FORMAT, FrameTargets};
 use crate::timing::StageTimer;
 
@@ -50,6 +51,8 @@ pub(crate) struct TraceParams {
 pub struct TracePasses {
     device: wgpu::Device,
     spheres: wgpu::BindGroup,
+    /// Group 3 of the hardware variant (the acceleration structure); `None`: software traversal.
+    rt: Option<wgpu::BindGroup>,
     /// Shared with the frame's other trace passes (with/without spheres) and the primary pass.
     bvh: Arc<TriangleBvhGpu>,
     layout: wgpu::BindGroupLayout,
@@ -78,6 +81,19 @@ impl TracePasses {
         prepared: &PreparedScene,
         bvh: Arc<TriangleBvhGpu>,
         spheres: &SpheresGpu,
+    ) -> Result<Self, GpuError> {
+        Self::with_bvh_rt(ctx, scene, prepared, bvh, spheres, None)
+    }
+
+    /// As [`TracePasses::with_bvh`]; with `rt`, the hardware variant: rays traverse `rt`'s
+    /// acceleration structures by ray queries (group 3) instead of the BVHs (still bound, unread).
+    pub fn with_bvh_rt(
+        ctx: &GpuContext,
+        scene: &SceneGpu,
+        prepared: &PreparedScene,
+        bvh: Arc<TriangleBvhGpu>,
+        spheres: &SpheresGpu,
+        rt: Option<&RtScene>,
     ) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let settings = &prepared.scene.trace;
@@ -150,10 +166,13 @@ impl TracePasses {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("trace"), entries: &entries });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("trace"),
-            bind_group_layouts: &[Some(&scene.layout), Some(&layout), Some(&spheres.layout)],
+            bind_group_layouts: &[Some(&scene.layout), Some(&layout), Some(&spheres.layout), rt.map(|rt| &rt.layout)],
             immediate_size: 0,
         });
-        let module = shaders::module(device, "trace", &format!("{BVH_WGSL}\n{SPHERES_WGSL}\n{TRACE_WGSL}"));
+        let module = match rt {
+            None => shaders::module(device, "trace", &format!("{BVH_WGSL}\n{SPHERES_WGSL}\n{TRACE_WGSL}")),
+            Some(_) => shaders::module_rq(device, "trace.hw", &format!("{RQ_WGSL}\n{SPHERES_RQ_WGSL}\n{TRACE_WGSL}")),
+        };
         let pipeline = |entry: &str| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(entry),
@@ -166,6 +185,7 @@ impl TracePasses {
         };
         Ok(Self {
             device: device.clone(),
+            rt: rt.map(|rt| rt.bind_group.clone()),
             spheres: spheres.bind_group.clone(),
             shadow: pipeline("shadow_rays"),
             reflection: pipeline("reflection_ray"),
@@ -176,6 +196,11 @@ impl TracePasses {
             counts,
             counts_readback,
         })
+    }
+
+    /// Whether the passes trace by ray queries (the hardware variant).
+    pub fn hardware(&self) -> bool {
+        self.rt.is_some()
     }
 
     /// The BVH the passes traverse (the rt-only primary pass shares it).
@@ -225,6 +250,9 @@ impl TracePasses {
             pass.set_bind_group(0, &scene.bind_group, &[]);
             pass.set_bind_group(1, &bind_group, &[]);
             pass.set_bind_group(2, &self.spheres, &[]);
+            if let Some(rt) = &self.rt {
+                pass.set_bind_group(3, rt, &[]);
+            }
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         encoder.copy_buffer_to_buffer(&self.counts, 0, &self.counts_readback, 0, 16);

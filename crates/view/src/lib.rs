@@ -29,7 +29,7 @@ use hybrid_core::memory;
 use hybrid_core::report::FrameReport;
 use hybrid_core::{FrameSettings, Mode, NO_OBJECT, RT_SCENE_OBJECT};
 use hybrid_cpu::capsule::PrimaryVisibility;
-use hybrid_gpu::GpuContext;
+use hybrid_gpu::{GpuContext, RtChoice};
 use hybrid_scene::{
     Aabb, Budget, Camera, CameraPath, HeuristicSettings, Lights, MemoryLimit, Policy, Scene, demo_scene, load_scene_or_model,
 };
@@ -81,6 +81,8 @@ pub struct ViewOptions {
     pub sphere_effects: bool,
     /// CPU backend: how the capsule finds each primary ray's sphere (`--capsule-visibility`).
     pub primary_visibility: PrimaryVisibility,
+    /// GPU backend: hardware or software ray tracing (`--rt`).
+    pub rt: RtChoice,
 }
 
 /// Why the viewer stopped with an error.
@@ -274,6 +276,7 @@ impl App {
                 clip_capsule: options.clip_capsule,
                 sphere_effects: options.sphere_effects,
                 primary_visibility: options.primary_visibility,
+                rt: options.rt,
             },
             heuristic,
             mode: options.mode,
@@ -365,6 +368,20 @@ impl App {
             }
             self.options.backend == BackendChoice::Gpu || hardware
         });
+        // `--rt`: `hw` needs the GPU backend on an adapter with ray queries (exit 2 otherwise).
+        match &ctx {
+            Some(ctx) => {
+                let path = self.options.rt.resolve(ctx).map_err(|e| ViewError::bad_input(format!("--rt hw: {e}")))?;
+                let how = if path.hardware { "hardware (ray queries)" } else { "software (BVH2 in WGSL)" };
+                eprintln!("ray tracing: {how} ({}{})", if self.options.rt == RtChoice::Auto { "auto: " } else { "" }, path.why);
+            }
+            None if self.options.rt == RtChoice::Hardware => {
+                return Err(ViewError::bad_input(
+                    "--rt hw: the CPU backend has no hardware ray tracing (use --backend gpu, or --rt auto|sw)",
+                ));
+            }
+            None => {}
+        }
         let (device, queue, adapter, backend_name) = match &ctx {
             Some(ctx) => {
                 let name = format!("gpu ({}, {})", ctx.summary.name, ctx.summary.backend);

@@ -9,8 +9,8 @@ use hybrid_core::report::FrameReport;
 use hybrid_core::{Frame, FrameSettings};
 use hybrid_cpu::capsule::PrimaryVisibility;
 use hybrid_cpu::frame::CpuRenderer;
-use hybrid_gpu::GpuContext;
 use hybrid_gpu::frame::GpuRenderer;
+use hybrid_gpu::{GpuContext, RtChoice};
 use hybrid_heuristic::Heuristic;
 use hybrid_scene::{Aabb, Camera, Lights, Projection, Scene};
 use self_cell::self_cell;
@@ -37,6 +37,8 @@ pub struct RendererKnobs {
     pub sphere_effects: bool,
     /// CPU backend only (the GPU capsule has one way to find primary hits).
     pub primary_visibility: PrimaryVisibility,
+    /// GPU backend: hardware or software ray tracing (`--rt`).
+    pub rt: RtChoice,
 }
 
 impl OpenScene {
@@ -44,7 +46,7 @@ impl OpenScene {
     pub fn open(scene: Scene, gpu: Option<&Arc<GpuContext>>, knobs: RendererKnobs) -> Result<OpenScene, String> {
         OpenScene::try_new(scene, |scene| {
             let mut r = match gpu {
-                Some(ctx) => Renderer::Gpu(Box::new(GpuRenderer::new(ctx.clone(), scene).map_err(|e| e.to_string())?)),
+                Some(ctx) => Renderer::Gpu(Box::new(GpuRenderer::with_rt(ctx.clone(), scene, knobs.rt).map_err(|e| e.to_string())?)),
                 None => Renderer::Cpu(Box::new(CpuRenderer::new(scene).map_err(|e| e.to_string())?)),
             };
             r.apply(knobs);

@@ -35,7 +35,7 @@ use self::plot::{Chart, HLine, Series, write_chart};
 use crate::CliError;
 use crate::args::BenchArgs;
 use crate::output::{OutputDir, write_bytes};
-use crate::render::{AnyRenderer, Backend, RenderOptions, check_memory, choose_backend, memory_limit};
+use crate::render::{AnyRenderer, Backend, RenderOptions, check_memory, check_rt, choose_backend, memory_limit};
 
 /// Warm-up frames rendered (and discarded) at the start of every pass.
 pub const WARMUP_FRAMES: usize = 2;
@@ -76,6 +76,15 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
 
     let machine_start = load_average();
     let options = RenderOptions::from(&args.capsule);
+    if let Some(line) = check_rt(&backend, options.rt)?
+        && !args.quiet
+    {
+        eprintln!("{line}");
+    }
+    let rt_used = match &backend {
+        Backend::Gpu(ctx) => options.rt.resolve(ctx).map_or("sw", |p| p.name()),
+        Backend::Cpu => "cpu",
+    };
     let mut modes: Vec<Mode> = Vec::new();
     for m in &args.modes {
         if !modes.contains(m) {
@@ -221,6 +230,8 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
             "clip_capsule": options.clip_capsule,
             "sphere_effects": options.sphere_effects,
             "capsule_visibility": options.capsule_visibility.name(),
+            // The traversal that traced (GPU backend: "hw" or "sw"; the CPU backend: "cpu").
+            "rt": rt_used,
         },
         "machine": machine,
         "static": static_summary,
