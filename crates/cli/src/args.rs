@@ -238,7 +238,8 @@ pub struct CapsuleArgs {
     /// acceleration structures built once per scene: a BLAS per mesh, the point-cloud spheres as
     /// AABB geometry); an adapter without ray queries is an error (exit 2), as is the CPU
     /// backend. `sw`: the software BVH2 traversal in WGSL (every adapter). `auto` (default):
-    /// hardware where the adapter offers it, else software; says which.
+    /// hardware where a GPU offers it, else software (a CPU adapter such as lavapipe stays on
+    /// software: its ray queries run on the CPU, slower); says which.
     #[arg(long, value_enum, default_value_t = RtArg::Auto)]
     pub rt: RtArg,
 }

@@ -67,15 +67,28 @@ impl RtChoice {
 
     /// Whether `ctx` traces in hardware under this choice: `Ok(None)` for software, with the
     /// reason where `auto` fell back; `Err` when `hw` was asked of an adapter without ray queries.
+    ///
+    /// `auto` leaves a CPU adapter (lavapipe, SwiftShader, WARP) on the software path even when it
+    /// offers ray queries: there they are a traversal on the same CPU, measured 1.1-31x slower
+    /// than the WGSL BVH on lavapipe (BENCHMARKS.md); `--rt hw` still uses them.
     pub fn resolve(self, ctx: &GpuContext) -> Result<RtPath, GpuError> {
         let missing = if ctx.ray_query { None } else { Some(ray_query_missing(&ctx.adapter).unwrap_or_else(|| "no ray queries".into())) };
+        let cpu_adapter = ctx.adapter.get_info().device_type == wgpu::DeviceType::Cpu;
+        self.decide(missing, cpu_adapter).map_err(|why| GpuError::Unsupported { adapter: ctx.summary.name.clone(), why })
+    }
+
+    /// [`RtChoice::resolve`]'s rule: `missing` is why the adapter has no ray queries (`None`
+    /// when it has them), `cpu_adapter` whether it is a software adapter running on the CPU.
+    fn decide(self, missing: Option<String>, cpu_adapter: bool) -> Result<RtPath, String> {
         match (self, missing) {
             (Self::Software, _) => Ok(RtPath { hardware: false, why: "--rt sw".into() }),
+            (Self::Auto, None) if cpu_adapter => Ok(RtPath {
+                hardware: false,
+                why: "a CPU adapter's ray queries run on the CPU and are slower than the software BVH; --rt hw uses them".into(),
+            }),
             (_, None) => Ok(RtPath { hardware: true, why: "the adapter has ray queries".into() }),
             (Self::Auto, Some(why)) => Ok(RtPath { hardware: false, why }),
-            (Self::Hardware, Some(why)) => {
-                Err(GpuError::Unsupported { adapter: ctx.summary.name.clone(), why: format!("no hardware ray tracing: {why}") })
-            }
+            (Self::Hardware, Some(why)) => Err(format!("no hardware ray tracing: {why}")),
         }
     }
 }
@@ -352,5 +365,19 @@ mod tests {
         assert_eq!(RtChoice::parse("auto"), Some(RtChoice::Auto));
         assert_eq!(RtChoice::parse("sw"), Some(RtChoice::Software));
         assert_eq!(RtChoice::parse("rtx"), None);
+    }
+
+    #[test]
+    fn auto_takes_ray_queries_on_gpus_only() {
+        // hw takes ray queries anywhere, sw never, auto on a GPU only (not a CPU adapter).
+        let has = || None::<String>;
+        let lacks = || Some("no ray queries".to_string());
+        assert!(RtChoice::Auto.decide(has(), false).unwrap().hardware);
+        assert!(!RtChoice::Auto.decide(has(), true).unwrap().hardware);
+        assert!(RtChoice::Auto.decide(has(), true).unwrap().why.contains("CPU adapter"));
+        assert!(!RtChoice::Auto.decide(lacks(), false).unwrap().hardware);
+        assert!(RtChoice::Hardware.decide(has(), true).unwrap().hardware);
+        assert!(RtChoice::Hardware.decide(lacks(), false).unwrap_err().contains("no ray queries"));
+        assert!(!RtChoice::Software.decide(has(), false).unwrap().hardware);
     }
 }
