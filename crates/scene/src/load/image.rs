@@ -24,7 +24,11 @@ pub(super) fn load(path: &Path, color_space: ColorSpace) -> Result<Texture, Scen
     limits.max_image_height = Some(MAX_TEXTURE_SIDE);
     let mut reader = reader;
     reader.limits(limits);
-    let img = reader.decode().map_err(|e| SceneError::new(path, format!("cannot decode texture: {e}")))?;
+    // The checks above cover the decoder panics fuzzing found; one left in the decoder is still
+    // its bug, turned into an error naming the file rather than taking the caller down.
+    let decoded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| reader.decode()))
+        .map_err(|_| SceneError::new(path, "the image decoder failed on this file"))?;
+    let img = decoded.map_err(|e| SceneError::new(path, format!("cannot decode texture: {e}")))?;
     let rgba = img.into_rgba8();
     let (w, h) = rgba.dimensions();
     if w == 0 || h == 0 {
@@ -72,6 +76,7 @@ pub(crate) fn check_jpeg_data_covers_frame(bytes: &[u8]) -> Result<(), String> {
                 let Some(len) = u16_at(i + 2) else { return Ok(()) };
                 if matches!(marker, 0xC0..=0xC2) {
                     frame = u16_at(i + 5).zip(u16_at(i + 7));
+                    check_jpeg_sampling(bytes.get(i + 9..).unwrap_or_default())?;
                 }
                 i += 2 + len;
             }
@@ -87,6 +92,22 @@ pub(crate) fn check_jpeg_data_covers_frame(bytes: &[u8]) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The frame header's sampling factors (`components` starts at its component count): the first
+/// component (luma) must sample at least as finely as every other in both directions, as in
+/// every 4:4:4, 4:2:2, 4:2:0, 4:4:0 and 4:1:1 file. zune-jpeg 0.5 asserts (a panic) on chroma
+/// sampled more finely than luma in one direction (found by fuzzing: Y 1x2 with Cr 2x1).
+fn check_jpeg_sampling(components: &[u8]) -> Result<(), String> {
+    let Some((&count, rest)) = components.split_first() else { return Ok(()) };
+    let factors: Vec<(u8, u8)> = rest.chunks_exact(3).take(count as usize).map(|c| (c[1] >> 4, c[1] & 15)).collect();
+    let Some(&(h0, v0)) = factors.first() else { return Ok(()) };
+    match factors.iter().enumerate().skip(1).find(|(_, f)| f.0 > h0 || f.1 > v0) {
+        Some((k, &(h, v))) => {
+            Err(format!("unsupported JPEG sampling: component {} samples {h}x{v}, more finely than the first component's {h0}x{v0}", k + 1))
+        }
+        None => Ok(()),
+    }
 }
 
 /// The texture's name: its file name.
@@ -139,6 +160,10 @@ mod tests {
         bytes[sof + 5..sof + 9].copy_from_slice(&[0x40, 0x00, 0x40, 0x00]);
         let e = check_jpeg_data_covers_frame(&bytes).unwrap_err();
         assert!(e.contains("16384x16384") && e.contains("4194304 blocks"), "{e}");
+        // Chroma sampled more finely than luma in one direction (zune-jpeg panicked on it).
+        assert_eq!(check_jpeg_sampling(&[3, 1, 0x22, 0, 2, 0x11, 1, 3, 0x11, 1]), Ok(()));
+        let e = check_jpeg_sampling(&[3, 1, 0x12, 0, 2, 0x11, 1, 3, 0x21, 1]).unwrap_err();
+        assert!(e.contains("component 3 samples 2x1") && e.contains("first component's 1x2"), "{e}");
         // Malformed marker streams are left to the decoder.
         assert_eq!(check_jpeg_data_covers_frame(&[0xFF, 0xD8, 0x12]), Ok(()));
         assert_eq!(check_jpeg_data_covers_frame(&[0xFF, 0xD8, 0xFF, 0xC0, 0xFF]), Ok(()));
