@@ -267,7 +267,16 @@ fn main() {
     let passes = std::env::var("TRACE_PASSES").ok().and_then(|p| p.parse().ok()).unwrap_or(5);
     let config = std::env::var("EMBREE_CONFIG").unwrap_or_else(|_| "threads=2".into());
     let device = Device::new(&config);
-    println!("rayon threads {}, Embree config {config:?}, best of {passes} alternating passes", rayon::current_num_threads());
+    // Our kernels' instruction-set path (`HYBRID_ISA` forces one).
+    let isa = hybrid_cpu::isa::init_from_env().unwrap_or_else(|e| {
+        eprintln!("error: {e}");
+        std::process::exit(2)
+    });
+    println!(
+        "rayon threads {}, our kernels {}, Embree config {config:?}, best of {passes} alternating passes",
+        rayon::current_num_threads(),
+        isa.name()
+    );
     for (name, scene, light) in scenes() {
         let prepared = PreparedScene::new(&scene);
         let tris = prepared.triangles.len();
