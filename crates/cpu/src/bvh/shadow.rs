@@ -2,7 +2,6 @@
 //! segment, with a per-light cache of the last opaque blocker.
 
 use super::*;
-use crate::isa;
 
 impl SceneBvh {
     /// Listing 8b: the fraction of light that passes along `origin + t·dir`, `0 < t < t_max`.
@@ -30,14 +29,6 @@ impl SceneBvh {
         if self.nodes.is_empty() {
             return 1.0;
         }
-        isa::dispatch(
-            #[inline(always)]
-            || self.any_hit_attenuation_with(prepared, origin, dir, t_max, cache),
-        )
-    }
-
-    #[inline(always)]
-    fn any_hit_attenuation_with(&self, prepared: &PreparedScene, origin: Vec3, dir: Vec3, t_max: f32, cache: &mut ShadowCache) -> f32 {
         let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
         // A cache from another tree only costs time: any pack of this tree hit by an opaque lane
         // is a true blocker.

@@ -133,10 +133,7 @@ impl SceneBvh {
         if self.nodes.is_empty() {
             return;
         }
-        isa::dispatch(
-            #[inline(always)]
-            || self.for_each_pack_hit_with(&RayPre::new(Vec3A::from(origin), Vec3A::from(dir)), t_min, t_max, f),
-        )
+        self.for_each_pack_hit_with(&RayPre::new(Vec3A::from(origin), Vec3A::from(dir)), t_min, t_max, f)
     }
 
     #[inline(always)]
