@@ -27,7 +27,6 @@ use hybrid_scene::{Camera, Environment, Lights, PointCloud};
 use rayon::prelude::*;
 
 use crate::camera_rays::{PrimaryRay, RayGen};
-use crate::isa;
 use crate::spheres::{BatchRay, BatchScratch, SphereBvh, SphereBvhError, TraversalStack};
 
 mod projected;
@@ -339,55 +338,50 @@ impl PointCloudCapsule {
             .with_max_len(1)
             .enumerate()
             .map(|(band, texels)| {
-                isa::dispatch(
-                    #[inline(always)]
-                    || {
-                        let mut hits = 0;
-                        let mut stack = TraversalStack::default();
-                        let mut scratch = BatchScratch::default();
-                        let mut rays = Vec::with_capacity(TILE * TILE);
-                        let mut batch = Vec::with_capacity(TILE * TILE);
-                        let mut found = Vec::with_capacity(TILE * TILE);
-                        let mut best = Vec::with_capacity(TILE * TILE);
-                        let rows = texels.len() / wu;
-                        let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((band * BAND + r) as u32)).collect();
-                        for (row0, col0) in (0..rows).step_by(TILE).flat_map(|r| (0..wu).step_by(TILE).map(move |c| (r, c))) {
-                            let cols = col0..(col0 + TILE).min(wu);
-                            let tile_rows = row0..(row0 + TILE).min(rows);
-                            rays.clear();
-                            batch.clear();
-                            for r in tile_rows.clone() {
-                                let row = band * BAND + r;
-                                for col in cols.clone() {
-                                    let ray = raygen.ray_at(view_x[col], view_y[r]);
-                                    let t_max = Self::clipped_t_max(raygen, &ray, clip, row * wu + col);
-                                    rays.push(ray);
-                                    batch.push(BatchRay { origin: ray.origin, dir: ray.dir, t_min: ray.t_min, t_max });
-                                }
-                            }
-                            // The tile's rays as one batch (they share the eye: the tree's levels above
-                            // the tile's frustum are skipped), then shaded in the same order.
-                            best.resize(rays.len(), None);
-                            this.closest_slots_batch(&mut scratch, &mut stack, &mut batch, &mut found, &mut best);
-                            let mut i = 0;
-                            for r in tile_rows.clone() {
-                                for col in cols.clone() {
-                                    let ray = &rays[i];
-                                    texels[r * wu + col] = match best[i] {
-                                        Some((t, ci, slot)) => {
-                                            hits += 1;
-                                            // Block D then block P, fused as in the paper's ray-generation shader.
-                                            encode_hit(this.shade_hit(ray, t, ci, slot), raygen.depth(ray, t))
-                                        }
-                                        None => MISS_TEXEL,
-                                    };
-                                    i += 1;
-                                }
-                            }
+                let mut hits = 0;
+                let mut stack = TraversalStack::default();
+                let mut scratch = BatchScratch::default();
+                let mut rays = Vec::with_capacity(TILE * TILE);
+                let mut batch = Vec::with_capacity(TILE * TILE);
+                let mut found = Vec::with_capacity(TILE * TILE);
+                let mut best = Vec::with_capacity(TILE * TILE);
+                let rows = texels.len() / wu;
+                let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((band * BAND + r) as u32)).collect();
+                for (row0, col0) in (0..rows).step_by(TILE).flat_map(|r| (0..wu).step_by(TILE).map(move |c| (r, c))) {
+                    let cols = col0..(col0 + TILE).min(wu);
+                    let tile_rows = row0..(row0 + TILE).min(rows);
+                    rays.clear();
+                    batch.clear();
+                    for r in tile_rows.clone() {
+                        let row = band * BAND + r;
+                        for col in cols.clone() {
+                            let ray = raygen.ray_at(view_x[col], view_y[r]);
+                            let t_max = Self::clipped_t_max(raygen, &ray, clip, row * wu + col);
+                            rays.push(ray);
+                            batch.push(BatchRay { origin: ray.origin, dir: ray.dir, t_min: ray.t_min, t_max });
                         }
-                        hits
-                    },
-                )
+                    }
+                    // The tile's rays as one batch (they share the eye: the tree's levels above
+                    // the tile's frustum are skipped), then shaded in the same order.
+                    best.resize(rays.len(), None);
+                    this.closest_slots_batch(&mut scratch, &mut stack, &mut batch, &mut found, &mut best);
+                    let mut i = 0;
+                    for r in tile_rows.clone() {
+                        for col in cols.clone() {
+                            let ray = &rays[i];
+                            texels[r * wu + col] = match best[i] {
+                                Some((t, ci, slot)) => {
+                                    hits += 1;
+                                    // Block D then block P, fused as in the paper's ray-generation shader.
+                                    encode_hit(this.shade_hit(ray, t, ci, slot), raygen.depth(ray, t))
+                                }
+                                None => MISS_TEXEL,
+                            };
+                            i += 1;
+                        }
+                    }
+                }
+                hits
             })
             .sum()
     }
@@ -413,40 +407,35 @@ impl PointCloudCapsule {
             .with_max_len(1)
             .enumerate()
             .map(|(band, texels)| {
-                isa::dispatch(
-                    #[inline(always)]
-                    || {
-                        // The worker's band buffers, reused from band to band and frame to frame (a
-                        // rayon `map_init` value lives for one task only: here, one band).
-                        let mut scratch = BAND_SCRATCH.take();
-                        let s = &mut scratch;
-                        let rows = texels.len() / wu;
-                        let row0 = band * projected::BAND_ROWS;
-                        let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((row0 + r) as u32)).collect();
-                        let primary = |row: usize, col: usize| raygen.ray_at(view_x[col], view_y[row]);
-                        s.begin(texels.len());
-                        for (ci, cloud) in this.clouds.iter().enumerate() {
-                            s.trace_cloud(&this.bins[ci], &cloud.bvh, ci, band, (wu, rows), shared_origin, |(row, col), limit| {
-                                let ray = primary(row, col);
-                                let t_max = limit.unwrap_or_else(|| Self::clipped_t_max(raygen, &ray, clip, (row0 + row) * wu + col));
-                                cloud.bvh.prepare_ray(ray.origin, ray.dir, ray.t_min, t_max)
-                            });
+                // The worker's band buffers, reused from band to band and frame to frame (a
+                // rayon `map_init` value lives for one task only: here, one band).
+                let mut scratch = BAND_SCRATCH.take();
+                let s = &mut scratch;
+                let rows = texels.len() / wu;
+                let row0 = band * projected::BAND_ROWS;
+                let view_y: Vec<f32> = (0..rows).map(|r| raygen.view_y((row0 + r) as u32)).collect();
+                let primary = |row: usize, col: usize| raygen.ray_at(view_x[col], view_y[row]);
+                s.begin(texels.len());
+                for (ci, cloud) in this.clouds.iter().enumerate() {
+                    s.trace_cloud(&this.bins[ci], &cloud.bvh, ci, band, (wu, rows), shared_origin, |(row, col), limit| {
+                        let ray = primary(row, col);
+                        let t_max = limit.unwrap_or_else(|| Self::clipped_t_max(raygen, &ray, clip, (row0 + row) * wu + col));
+                        cloud.bvh.prepare_ray(ray.origin, ray.dir, ray.t_min, t_max)
+                    });
+                }
+                let mut hits = 0;
+                for (row, (texels, best)) in texels.chunks_mut(wu).zip(s.best.chunks(wu)).enumerate() {
+                    for (col, (texel, best)) in texels.iter_mut().zip(best).enumerate() {
+                        if let Some((t, ci, slot, center)) = *best {
+                            hits += 1;
+                            let ray = primary(row, col);
+                            // Block D then block P, as in the BVH path.
+                            *texel = encode_hit(this.shade_hit_at(&ray, t, ci, slot, center), raygen.depth(&ray, t));
                         }
-                        let mut hits = 0;
-                        for (row, (texels, best)) in texels.chunks_mut(wu).zip(s.best.chunks(wu)).enumerate() {
-                            for (col, (texel, best)) in texels.iter_mut().zip(best).enumerate() {
-                                if let Some((t, ci, slot, center)) = *best {
-                                    hits += 1;
-                                    let ray = primary(row, col);
-                                    // Block D then block P, as in the BVH path.
-                                    *texel = encode_hit(this.shade_hit_at(&ray, t, ci, slot, center), raygen.depth(&ray, t));
-                                }
-                            }
-                        }
-                        BAND_SCRATCH.set(scratch);
-                        hits
-                    },
-                )
+                    }
+                }
+                BAND_SCRATCH.set(scratch);
+                hits
             })
             .sum()
     }

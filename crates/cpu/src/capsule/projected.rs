@@ -27,7 +27,6 @@ use hybrid_core::depth_merge::{view_z_from_depth, view_z_from_depth_orthographic
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
-use crate::isa;
 use crate::spheres::{PreparedRay, SphereBvh, sphere_hits4};
 
 /// Rows per band: the unit of binning and of parallel work. Higher values file fewer spheres
@@ -288,45 +287,40 @@ impl CloudBins {
         self.chunks.truncate(n_chunks);
         self.chunks.resize_with(n_chunks, ChunkBins::default);
         self.chunks.par_iter_mut().enumerate().with_max_len(1).for_each(|(k, ch)| {
-            isa::dispatch(
-                #[inline(always)]
-                || {
-                    let slots = k * BIN_CHUNK..((k + 1) * BIN_CHUNK).min(n);
-                    ch.rects.clear();
-                    ch.nearest = f32::INFINITY;
-                    ch.start.clear();
-                    ch.start.resize(bands + 1, 0);
-                    // Four slots at a time (the centre arrays are padded past the last sphere).
-                    for first in slots.clone().step_by(4) {
-                        let load = |v: &[f32]| Vec4::from_slice(&v[first..first + 4]);
-                        let rects = proj.rects4(load(xs), load(ys), load(zs));
-                        for (lane, rect) in rects.into_iter().enumerate().take(slots.end - first) {
-                            let Some(([x0, x1, y0, y1], nearest)) = rect else { continue };
-                            if far.is_some_and(|f| f.hides([x0, x1, y0, y1], nearest)) {
-                                continue;
-                            }
-                            ch.nearest = ch.nearest.min(nearest);
-                            let slot = first + lane;
-                            ch.rects.push(Binned { c: Vec3::new(xs[slot], ys[slot], zs[slot]), slot: slot as u32, x0, x1, y0, y1 });
-                            for b in y0 as usize / BAND_ROWS..=y1 as usize / BAND_ROWS {
-                                ch.start[b + 1] += 1;
-                            }
-                        }
+            let slots = k * BIN_CHUNK..((k + 1) * BIN_CHUNK).min(n);
+            ch.rects.clear();
+            ch.nearest = f32::INFINITY;
+            ch.start.clear();
+            ch.start.resize(bands + 1, 0);
+            // Four slots at a time (the centre arrays are padded past the last sphere).
+            for first in slots.clone().step_by(4) {
+                let load = |v: &[f32]| Vec4::from_slice(&v[first..first + 4]);
+                let rects = proj.rects4(load(xs), load(ys), load(zs));
+                for (lane, rect) in rects.into_iter().enumerate().take(slots.end - first) {
+                    let Some(([x0, x1, y0, y1], nearest)) = rect else { continue };
+                    if far.is_some_and(|f| f.hides([x0, x1, y0, y1], nearest)) {
+                        continue;
                     }
-                    for b in 0..bands {
-                        ch.start[b + 1] += ch.start[b];
+                    ch.nearest = ch.nearest.min(nearest);
+                    let slot = first + lane;
+                    ch.rects.push(Binned { c: Vec3::new(xs[slot], ys[slot], zs[slot]), slot: slot as u32, x0, x1, y0, y1 });
+                    for b in y0 as usize / BAND_ROWS..=y1 as usize / BAND_ROWS {
+                        ch.start[b + 1] += 1;
                     }
-                    ch.records.resize(ch.start[bands] as usize, Binned::default());
-                    ch.cursor.clear();
-                    ch.cursor.extend_from_slice(&ch.start[..bands]);
-                    for rect in &ch.rects {
-                        for b in rect.y0 as usize / BAND_ROWS..=rect.y1 as usize / BAND_ROWS {
-                            ch.records[ch.cursor[b] as usize] = *rect;
-                            ch.cursor[b] += 1;
-                        }
-                    }
-                },
-            )
+                }
+            }
+            for b in 0..bands {
+                ch.start[b + 1] += ch.start[b];
+            }
+            ch.records.resize(ch.start[bands] as usize, Binned::default());
+            ch.cursor.clear();
+            ch.cursor.extend_from_slice(&ch.start[..bands]);
+            for rect in &ch.rects {
+                for b in rect.y0 as usize / BAND_ROWS..=rect.y1 as usize / BAND_ROWS {
+                    ch.records[ch.cursor[b] as usize] = *rect;
+                    ch.cursor[b] += 1;
+                }
+            }
         });
         self.order.clear();
         self.order.extend(0..n_chunks);
@@ -396,7 +390,6 @@ impl BandScratch {
     /// cloud), as the BVH path does. `shared_origin`: the origin every prepared ray has, bit for
     /// bit, if there is one (a perspective camera's eye), splatted instead of loaded per pixel.
     #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
     pub(super) fn trace_cloud(
         &mut self,
         bins: &CloudBins,

@@ -2,7 +2,6 @@
 //! into 4-wide nodes in parallel.
 
 use super::*;
-use crate::isa;
 
 /// Build-time item: a centre and its original index (16 bytes).
 #[derive(Debug, Clone, Copy)]
@@ -113,14 +112,6 @@ pub(super) const EMPTY_BIN: Bin = Bin { count: 0, b: Bounds::EMPTY };
 /// Bins of one range along all three axes.
 /// Bins of one range along `axis` (the others stay empty).
 pub(super) fn bin_items(items: &[Item], cmin: Vec3, scale: Vec3, axis: usize) -> [[Bin; BINS]; 3] {
-    isa::dispatch(
-        #[inline(always)]
-        || bin_items_with(items, cmin, scale, axis),
-    )
-}
-
-#[inline(always)]
-fn bin_items_with(items: &[Item], cmin: Vec3, scale: Vec3, axis: usize) -> [[Bin; BINS]; 3] {
     let mut bins = [[EMPTY_BIN; BINS]; 3];
     let (lo, sc) = (cmin[axis], scale[axis]);
     let row = &mut bins[axis];
@@ -371,14 +362,6 @@ pub(super) fn open_kids(nodes2: &[Node], root: u32) -> ([(u32, Vec3, Vec3); 4], 
 
 /// In-place partition: items for which `left` holds first; returns their count.
 pub(super) fn partition(items: &mut [Item], left: impl Fn(&Item) -> bool) -> usize {
-    isa::dispatch(
-        #[inline(always)]
-        || partition_with(items, left),
-    )
-}
-
-#[inline(always)]
-fn partition_with(items: &mut [Item], left: impl Fn(&Item) -> bool) -> usize {
     let mut i = 0;
     let mut j = items.len();
     loop {

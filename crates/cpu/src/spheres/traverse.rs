@@ -2,7 +2,6 @@
 //! from a shared cut, and the exact perpendicular-distance sphere tests they end in.
 
 use super::*;
-use crate::isa;
 
 impl SphereBvh {
     /// The closest sphere hit by the ray `origin + t·dir` with `t_min ≤ t ≤ t_max`: the hit `t`
@@ -25,23 +24,17 @@ impl SphereBvh {
 
     /// As [`SphereBvh::closest_hit_slot`], reusing `stack` (one per thread saves its set-up per ray).
     pub fn closest_hit_slot_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, u32)> {
-        isa::dispatch(
-            #[inline(always)]
-            || self.query::<false>(stack, origin, dir, t_min, t_max),
-        )
+        self.query::<false>(stack, origin, dir, t_min, t_max)
     }
 
     /// Whether any sphere is hit with `t_min ≤ t ≤ t_max` (exactly when
     /// [`SphereBvh::closest_hit_slot_with`] finds a hit), stopping at the first one found.
     pub fn any_hit_with(&self, stack: &mut TraversalStack, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
-        isa::dispatch(
-            #[inline(always)]
-            || self.query::<true>(stack, origin, dir, t_min, t_max).is_some(),
-        )
+        self.query::<true>(stack, origin, dir, t_min, t_max).is_some()
     }
 
     /// One ray from the root: the closest hit, or (`ANY`) the first one found.
-    #[inline(always)]
+    #[inline]
     pub(super) fn query<const ANY: bool>(
         &self,
         stack: &mut TraversalStack,
@@ -100,20 +93,6 @@ impl SphereBvh {
     /// once for the batch (a cut of the tree under the batch's frustum, [`BatchScratch`]) and each
     /// ray starts from them instead of the root, skipping the levels above.
     pub fn closest_hits_batch(
-        &self,
-        scratch: &mut BatchScratch,
-        stack: &mut TraversalStack,
-        rays: &[BatchRay],
-        hits: &mut [Option<(f32, u32)>],
-    ) {
-        isa::dispatch(
-            #[inline(always)]
-            || self.closest_hits_batch_with(scratch, stack, rays, hits),
-        )
-    }
-
-    #[inline(always)]
-    fn closest_hits_batch_with(
         &self,
         scratch: &mut BatchScratch,
         stack: &mut TraversalStack,
@@ -287,7 +266,7 @@ impl SphereBvh {
     /// Ordered depth-first traversal from the subtree `root`, then the subtrees on `stack`
     /// (see the module notes). `NONNEG`: the ray's `t_min` is ≥ 0 (see [`Ray::slab4`]). `ANY`:
     /// return the first hit found instead of the closest (for occlusion queries).
-    #[inline(always)]
+    #[inline]
     pub(super) fn traverse<const NONNEG: bool, const ANY: bool>(
         &self,
         stack: &mut Vec<(u32, f32)>,
