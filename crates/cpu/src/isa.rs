@@ -2,11 +2,11 @@
 //!
 //! The default build targets the portable x86-64 baseline (SSE2), which every x86-64 CPU runs.
 //! The triangle BVH's closest-hit traversal with its leaf tests, the triangle BVH build's
-//! binning and partitioning, the raster's passes and the deferred lighting bands are also
-//! compiled for AVX2 + FMA (`x86-64-v3`) and AVX-512 (`x86-64-v4`), and [`dispatch`] runs each
-//! with the best set this CPU has. Measured (BENCHMARKS.md, "Issue 20"), the other kernels stay
-//! on the baseline: shadow rays' any-hit traversal (the switch cost its short rays more than the
-//! wider encoding gained), the sphere BVH build (slower compiled for AVX2) and the capsule (no
+//! binning and partitioning and the deferred lighting bands are also compiled for AVX2 + FMA
+//! (`x86-64-v3`) and AVX-512 (`x86-64-v4`), and [`dispatch`] runs each with the best set this
+//! CPU has. Measured (BENCHMARKS.md, "Issue 20"), the other kernels stay on the baseline:
+//! shadow rays' any-hit traversal (the switch cost its short rays more than the wider encoding
+//! gained), the sphere BVH build (slower compiled for AVX2), the capsule and the raster (no
 //! gain). `HYBRID_ISA=sse2|avx2|avx512` forces one (tests, comparisons); [`init_from_env`]
 //! reads it, and a value this build or CPU does not offer is an error naming the variable.
 //!

@@ -30,7 +30,6 @@ use rayon::prelude::*;
 
 use crate::camera_rays::PrimaryRays;
 use crate::depth_merge::{layer_fits, rt_surface_with};
-use crate::isa;
 use hybrid_core::prepare::{Plain4, PreparedScene, TriangleRef, TriangleSurface};
 
 /// Rows per band (the unit of parallel work and of binning).
@@ -262,7 +261,6 @@ struct ClipVert {
 
 /// Fills `chunk` (its vectors reused from frame to frame) with the screen triangles of scene
 /// triangles `first..first + SETUP_CHUNK` and their band bins.
-#[inline(always)]
 fn setup_chunk(
     chunk: &mut Chunk,
     first: usize,
@@ -626,14 +624,9 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     }
     slices.into_par_iter().zip(&prepared.meshes).for_each(|(out, m)| {
         out.par_chunks_mut(VERTEX_CHUNK).zip(m.positions.par_chunks(VERTEX_CHUNK)).for_each(|(o, p)| {
-            isa::dispatch(
-                #[inline(always)]
-                || {
-                    for (o, p) in o.iter_mut().zip(p) {
-                        *o = vpt.vertex(*p);
-                    }
-                },
-            )
+            for (o, p) in o.iter_mut().zip(p) {
+                *o = vpt.vertex(*p);
+            }
         });
     });
 
@@ -648,10 +641,7 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     chunks.resize_with(n_chunks, Chunk::default);
     let (verts, mesh_base) = (&*verts, &*mesh_base);
     chunks.par_iter_mut().enumerate().with_max_len(1).for_each(|(k, chunk)| {
-        isa::dispatch(
-            #[inline(always)]
-            || setup_chunk(chunk, k * SETUP_CHUNK, prepared, verts, mesh_base, &vpt, bands),
-        )
+        setup_chunk(chunk, k * SETUP_CHUNK, prepared, verts, mesh_base, &vpt, bands);
     });
     let chunks = &*chunks;
 
@@ -661,12 +651,10 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     let band_len = w * BAND_ROWS as usize;
     let rows = g.bands_mut(band_len);
     let ctx = BandContext { prepared, chunks, rt_layer, rays: &rays, width, height, clear };
-    rows.into_par_iter().enumerate().with_max_len(1).for_each_init(BandScratch::default, |scratch, (band, mut out)| {
-        isa::dispatch(
-            #[inline(always)]
-            || ctx.band(band, &mut out, scratch),
-        )
-    });
+    rows.into_par_iter()
+        .enumerate()
+        .with_max_len(1)
+        .for_each_init(BandScratch::default, |scratch, (band, mut out)| ctx.band(band, &mut out, scratch));
     SCRATCH.with(|s| *s.borrow_mut() = scratch);
 }
 
@@ -698,7 +686,6 @@ struct BandContext<'a, 's> {
 }
 
 impl BandContext<'_, '_> {
-    #[inline(always)]
     fn band(&self, band: usize, out: &mut BandRows, scratch: &mut BandScratch) {
         let BandScratch { depth, ids } = scratch;
         let w = self.width as usize;
