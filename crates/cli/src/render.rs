@@ -119,19 +119,19 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     if !args.quiet {
         let t = &frame.report.timings_ms;
         eprintln!(
-            "{}: {}x{} {}{} in {:.1} ms ({} {:.1}, heuristic {:.2}, trace {:.1}, blend {:.1}) → {}",
+            "{}: {}x{} {} in {:.1} ms ({} {:.1}, heuristic {:.2}, trace {:.1}, blend {:.1}) → {}{}",
             args.scene.as_ref().map_or("demo".to_string(), |p| p.display().to_string()),
             width,
             height,
             if settings.mode == Mode::Hybrid { "hybrid" } else { settings.mode.name() },
-            cpu_isa(&frame.report).map_or(String::new(), |isa| format!(" (cpu, {isa} kernels)")),
             t.frame,
             stage_label(Stage::Raster, settings.mode),
             t.raster,
             t.heuristic,
             t.trace,
             t.blend,
-            args.output.display()
+            args.output.display(),
+            cpu_isa(&frame.report).map_or(String::new(), |isa| format!(" [cpu kernels: {isa}]"))
         );
     }
     Ok(())

@@ -105,7 +105,7 @@ fn the_default_path_is_the_best_and_bad_values_exit_2() {
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(json["cpu_isa"], Isa::best().name());
     // The one-line summary names it too.
-    assert!(String::from_utf8_lossy(&o.stderr).contains(&format!("(cpu, {} kernels)", Isa::best().name())));
+    assert!(String::from_utf8_lossy(&o.stderr).contains(&format!("[cpu kernels: {}]", Isa::best().name())));
 
     std::fs::remove_file(&out).unwrap();
     let o = hybrid(Some("avx9"), &args);
