@@ -115,7 +115,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         write_all(dir, &DumpInput { gbuffer: &frame.gbuffer, buffers: &frame.buffers, rt_packed: frame.rt_packed.as_ref() })?;
     }
     if let Some(path) = &args.report {
-        let json = serde_json::to_vec_pretty(&frame.report).map_err(|e| CliError::failure(e.to_string()))?;
+        let json = serde_json::to_vec_pretty(&report_json(&frame.report)?).map_err(|e| CliError::failure(e.to_string()))?;
         write_bytes(path, &json)?;
     }
     if let Some(d) = dump_dir {
@@ -124,7 +124,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     if !args.quiet {
         let t = &frame.report.timings_ms;
         eprintln!(
-            "{}: {}x{} {} in {:.1} ms ({} {:.1}, heuristic {:.2}, trace {:.1}, blend {:.1}) → {}",
+            "{}: {}x{} {} in {:.1} ms ({} {:.1}, heuristic {:.2}, trace {:.1}, blend {:.1}) → {}{}",
             args.scene.as_ref().map_or("demo".to_string(), |p| p.display().to_string()),
             width,
             height,
@@ -135,10 +135,26 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
             t.heuristic,
             t.trace,
             t.blend,
-            args.output.display()
+            args.output.display(),
+            cpu_isa(&frame.report).map_or(String::new(), |isa| format!(" [cpu kernels: {isa}]"))
         );
     }
     Ok(())
+}
+
+/// The CPU kernels' instruction-set path, for a frame the CPU backend rendered.
+fn cpu_isa(report: &hybrid_core::report::FrameReport) -> Option<&'static str> {
+    (report.backend == "cpu").then(|| hybrid_cpu::isa::active().name())
+}
+
+/// `--report`'s JSON: the frame report, plus `cpu_isa` (the CPU kernels' instruction-set path,
+/// `hybrid_cpu::isa`) when the CPU backend rendered it.
+fn report_json(report: &hybrid_core::report::FrameReport) -> Result<serde_json::Value, CliError> {
+    let mut json = serde_json::to_value(report).map_err(|e| CliError::failure(e.to_string()))?;
+    if let (Some(isa), Some(map)) = (cpu_isa(report), json.as_object_mut()) {
+        map.insert("cpu_isa".into(), isa.into());
+    }
+    Ok(json)
 }
 
 /// A stage's name for people: stage 1 is `primary rays` in `rt-only`, which has no raster (its

@@ -70,6 +70,7 @@ fn tiny_bench_of_the_demo_writes_every_output() {
     assert_eq!(json["machine"]["backend"], "cpu");
     assert!(json["machine"]["cores"].as_u64().unwrap() >= 1);
     assert!(json["machine"].get("cpu_model").is_some());
+    assert_eq!(json["machine"]["cpu_isa"], hybrid_cpu::isa::Isa::best().name());
     for mode in ["hybrid", "all", "rt-only"] {
         let st = &json["static"][mode];
         assert_eq!(st["frames"], 2, "static {mode}");

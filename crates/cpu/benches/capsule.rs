@@ -255,6 +255,12 @@ fn one_shot() {
 criterion_group!(benches, bench);
 
 fn main() {
+    // Our kernels' instruction-set path (`HYBRID_ISA` forces one).
+    let isa = hybrid_cpu::isa::init_from_env().unwrap_or_else(|e| {
+        eprintln!("error: {e}");
+        std::process::exit(2)
+    });
+    eprintln!("kernels: {}", isa.name());
     // `cargo bench` passes `--bench`; `cargo test --benches` does not (skip the heavy report there).
     if std::env::args().any(|a| a == "--bench") {
         one_shot();

@@ -15,7 +15,9 @@
 //! - shadow rays: ours `any_hit_attenuation_cached` (the trace stage's path) and without the
 //!   cache, Embree `rtcOccluded1`;
 //! - reflection rays and diffuse-bounce rays (cosine-weighted about the normal): ours
-//!   `closest_hit`, Embree `rtcIntersect1`.
+//!   `closest_hit`, Embree `rtcIntersect1`;
+//! - primary rays of the scene's camera (640×360, in 4×4 pixel tiles): ours `closest_hit` one
+//!   ray at a time, Embree `rtcIntersect16`, one 16-ray packet per tile.
 //!
 //! Rays go out in chunks of 256 on rayon's pool (2 threads here), for both. Each line gives the
 //! best of `TRACE_PASSES` (default 5) wall-clock passes, and the ratio ours / Embree. The answers
@@ -34,8 +36,9 @@ use std::time::Instant;
 use glam::Vec3;
 use hybrid_core::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
+use hybrid_cpu::camera_rays::PrimaryRays;
 use rayon::prelude::*;
-use trace_scenes::{load_average, rays, scenes, trace_closest_hits, trace_shadow_rays};
+use trace_scenes::{HEIGHT, WIDTH, load_average, rays, scenes, trace_closest_hits, trace_shadow_rays};
 
 // --- Embree 3.13 C API (rtcore.h), the parts used here ---------------------------------------
 
@@ -84,6 +87,29 @@ struct RtcRayHit {
     hit: RtcHit,
 }
 
+/// `struct RTCRayHit16` (`RTCRay16` then `RTCHit16`, SoA, 64-byte aligned), flattened.
+#[repr(C, align(64))]
+struct RtcRayHit16 {
+    org: [[f32; 16]; 3],
+    tnear: [f32; 16],
+    dir: [[f32; 16]; 3],
+    time: [f32; 16],
+    tfar: [f32; 16],
+    mask: [c_uint; 16],
+    id: [c_uint; 16],
+    flags: [c_uint; 16],
+    ng: [[f32; 16]; 3],
+    u: [f32; 16],
+    v: [f32; 16],
+    prim_id: [c_uint; 16],
+    geom_id: [c_uint; 16],
+    inst_id: [[c_uint; 16]; 1],
+}
+
+/// The `valid` mask of `rtcIntersect16` (-1 = active lane), 64-byte aligned as Embree requires.
+#[repr(C, align(64))]
+struct Valid16([i32; 16]);
+
 /// `struct RTCIntersectContext` with one instance level and no minimum width (Debian's build:
 /// `RTC_MAX_INSTANCE_LEVEL_COUNT 1`, `RTC_MIN_WIDTH 0` in `rtcore_config.h`).
 #[repr(C)]
@@ -122,6 +148,7 @@ unsafe extern "C" {
     fn rtcAttachGeometry(scene: RtcScene, geometry: RtcGeometry) -> c_uint;
     fn rtcReleaseGeometry(geometry: RtcGeometry);
     fn rtcIntersect1(scene: RtcScene, context: *mut RtcIntersectContext, rayhit: *mut RtcRayHit);
+    fn rtcIntersect16(valid: *const Valid16, scene: RtcScene, context: *mut RtcIntersectContext, rayhit: *mut RtcRayHit16);
     fn rtcOccluded1(scene: RtcScene, context: *mut RtcIntersectContext, ray: *mut RtcRay);
 }
 
@@ -224,6 +251,42 @@ impl<'d> Scene<'d> {
         unsafe { rtcIntersect1(self.scene, &mut context, &mut rh) };
         (rh.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some(rh.ray.tfar)
     }
+
+    /// `rtcIntersect16` on up to 16 rays `(origin, unit dir, t_far)` as one packet: each ray's
+    /// closest hit distance (`None`: a miss), lanes past `rays.len()` `None`.
+    fn closest_hits16(&self, rays: &[(Vec3, Vec3, f32)]) -> [Option<f32>; 16] {
+        assert!(rays.len() <= 16);
+        let mut valid = Valid16([0; 16]);
+        let mut rh = RtcRayHit16 {
+            org: [[0.0; 16]; 3],
+            tnear: [0.0; 16],
+            dir: [[0.0; 16]; 3],
+            time: [0.0; 16],
+            tfar: [0.0; 16],
+            mask: [u32::MAX; 16],
+            id: [0; 16],
+            flags: [0; 16],
+            ng: [[0.0; 16]; 3],
+            u: [0.0; 16],
+            v: [0.0; 16],
+            prim_id: [0; 16],
+            geom_id: [RTC_INVALID_GEOMETRY_ID; 16],
+            inst_id: [[RTC_INVALID_GEOMETRY_ID; 16]],
+        };
+        for (k, &(o, d, far)) in rays.iter().enumerate() {
+            valid.0[k] = -1;
+            for a in 0..3 {
+                rh.org[a][k] = o[a];
+                rh.dir[a][k] = d[a];
+            }
+            rh.tfar[k] = far;
+        }
+        let mut context = RtcIntersectContext::new();
+        // SAFETY: FFI on a committed scene with a valid context, and a 64-byte aligned valid mask
+        // and ray/hit packet of 16 lanes.
+        unsafe { rtcIntersect16(&valid, self.scene, &mut context, &mut rh) };
+        std::array::from_fn(|k| (k < rays.len() && rh.geom_id[k] != RTC_INVALID_GEOMETRY_ID).then_some(rh.tfar[k]))
+    }
 }
 
 impl Drop for Scene<'_> {
@@ -267,7 +330,16 @@ fn main() {
     let passes = std::env::var("TRACE_PASSES").ok().and_then(|p| p.parse().ok()).unwrap_or(5);
     let config = std::env::var("EMBREE_CONFIG").unwrap_or_else(|_| "threads=2".into());
     let device = Device::new(&config);
-    println!("rayon threads {}, Embree config {config:?}, best of {passes} alternating passes", rayon::current_num_threads());
+    // Our kernels' instruction-set path (`HYBRID_ISA` forces one).
+    let isa = hybrid_cpu::isa::init_from_env().unwrap_or_else(|e| {
+        eprintln!("error: {e}");
+        std::process::exit(2)
+    });
+    println!(
+        "rayon threads {}, our kernels {}, Embree config {config:?}, best of {passes} alternating passes",
+        rayon::current_num_threads(),
+        isa.name()
+    );
     for (name, scene, light) in scenes() {
         let prepared = PreparedScene::new(&scene);
         let tris = prepared.triangles.len();
@@ -333,5 +405,49 @@ fn main() {
             };
             line(name, kind, rays.len(), "rays", race(passes, ours, theirs));
         }
+
+        // Primary rays of the scene's camera at WIDTH × HEIGHT, in 4×4 pixel tiles (the coherent
+        // groups a packet tracer wants): ours one ray at a time, Embree 16-wide packets, one
+        // per tile; 256 rays (16 tiles) per rayon chunk for both. Same answers first.
+        let cam = PrimaryRays::new(&prepared.scene.camera, WIDTH, HEIGHT);
+        let primary: Vec<(Vec3, Vec3, f32)> = (0..HEIGHT / 4)
+            .flat_map(|ty| (0..WIDTH / 4).map(move |tx| (tx, ty)))
+            .flat_map(|(tx, ty)| (0..16).map(move |k| (tx * 4 + k % 4, ty * 4 + k / 4)))
+            .map(|(x, y)| cam.ray(x, y))
+            .collect();
+        let ours_hits: Vec<Option<f32>> = primary.iter().map(|&(o, d, far)| bvh.closest_hit(o, d, 0.0, far).map(|h| h.t)).collect();
+        let theirs_hits: Vec<Option<f32>> = primary.chunks(16).flat_map(|c| embree.closest_hits16(c)).collect();
+        let differ = ours_hits
+            .iter()
+            .zip(&theirs_hits)
+            .filter(|(a, b)| match (a, b) {
+                (Some(a), Some(b)) => (a - b).abs() > 1e-3 * a.abs().max(b.abs()),
+                (a, b) => a.is_some() != b.is_some(),
+            })
+            .count();
+        println!(
+            "{name:>10} primary rays: {} hit by ours, {} by Embree's packets, {differ} differ",
+            ours_hits.iter().flatten().count(),
+            theirs_hits.iter().flatten().count()
+        );
+        let ours = || {
+            std::hint::black_box(
+                primary
+                    .par_chunks(256)
+                    .with_max_len(1)
+                    .map(|c| c.iter().filter_map(|&(o, d, far)| bvh.closest_hit(o, d, 0.0, far)).map(|h| h.t).sum::<f32>())
+                    .sum::<f32>(),
+            );
+        };
+        let theirs = || {
+            std::hint::black_box(
+                primary
+                    .par_chunks(256)
+                    .with_max_len(1)
+                    .map(|c| c.chunks(16).map(|p| embree.closest_hits16(p).iter().flatten().sum::<f32>()).sum::<f32>())
+                    .sum::<f32>(),
+            );
+        };
+        line(name, "primary rays, 16-packets", primary.len(), "rays", race(passes, ours, theirs));
     }
 }

@@ -204,6 +204,12 @@ fn cpu_mode(iters: u32) {
 criterion_group!(benches, raster);
 
 fn main() {
+    // Our kernels' instruction-set path (`HYBRID_ISA` forces one).
+    let isa = hybrid_cpu::isa::init_from_env().unwrap_or_else(|e| {
+        eprintln!("error: {e}");
+        std::process::exit(2)
+    });
+    eprintln!("kernels: {}", isa.name());
     if let Some(n) = std::env::var("RASTER_CPU").ok().and_then(|v| v.parse::<u32>().ok()) {
         cpu_mode(n.max(1));
         return;

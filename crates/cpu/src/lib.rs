@@ -7,6 +7,7 @@ pub mod camera_rays;
 pub mod capsule;
 pub mod depth_merge;
 pub mod frame;
+pub mod isa;
 pub mod lighting;
 pub mod raster;
 pub mod spheres;

@@ -10,6 +10,7 @@ use hybrid_scene::{Camera, Environment, Scene, Skybox, Texture};
 use rayon::prelude::*;
 
 use crate::camera_rays::ViewRays;
+use crate::isa;
 
 /// Rows per parallel task of [`deferred_lighting`].
 const LIGHTING_ROWS: usize = 8;
@@ -44,62 +45,67 @@ pub fn deferred_lighting_into(gbuffer: &GBuffer, scene: &Scene, camera: &Camera,
     let frame_lights = FrameLights::new(&scene.lights, env);
     let g = gbuffer;
     out.par_chunks_mut(w * LIGHTING_ROWS).enumerate().for_each(|(band, rows)| {
-        let base = band * w * LIGHTING_ROWS;
-        let range = base..base + rows.len();
-        let (ids, pos, nrm, emi, amb, dif, spe) = (
-            &g.object_id[range.clone()],
-            &g.position[range.clone()],
-            &g.normal[range.clone()],
-            &g.emission[range.clone()],
-            &g.ambient[range.clone()],
-            &g.diffuse[range.clone()],
-            &g.specular[range],
-        );
-        let mut sky_pixels = Vec::new();
-        let mut lit_pixels = Vec::with_capacity(rows.len());
-        for (k, &id) in ids.iter().enumerate() {
-            if id == NO_OBJECT {
-                // The skybox behind the pixel, four pixels at a time below.
-                sky_pixels.push(k as u32);
-            } else {
-                lit_pixels.push(k);
-            }
-        }
-        // The fields lighting reads, exactly as `GBuffer::surface` gives them.
-        let surface = |k: usize| {
-            let (d, s) = (dif[k], spe[k]);
-            Surface {
-                position: pos[k],
-                normal: nrm[k],
-                emission: emi[k],
-                ambient: amb[k],
-                diffuse: d.truncate(),
-                opacity: d.w,
-                specular: s.truncate(),
-                shininess: s.w,
-                reflectivity: 0.0,
-                ior: 1.0,
-            }
-        };
-        // Covered pixels four at a time (`FrameLights::local_lighting4`: each lane exactly the
-        // one-pixel path), the rest one by one. With a single light, gathering the lanes costs
-        // more than it saves (tree-merge at 1080p: lighting 16.5 → 17.9 ms), so all one by one.
-        let vector = if frame_lights.len() >= VECTOR_LIGHTS_MIN { lit_pixels.len() / 4 * 4 } else { 0 };
-        for g in lit_pixels[..vector].chunks_exact(4) {
-            let s = [surface(g[0]), surface(g[1]), surface(g[2]), surface(g[3])];
-            // Indexed, not `s.map`: mapping an array of large `Surface`s became an out-of-line
-            // call that copied them through memory (a store-forwarding stall per group).
-            let view = [0, 1, 2, 3].map(|l| rays.view_dir(s[l].position));
-            let c = frame_lights.local_lighting4(&s, view);
-            for (&k, c) in g.iter().zip(c) {
-                rows[k] = c;
-            }
-        }
-        for &k in &lit_pixels[vector..] {
-            let s = surface(k);
-            rows[k] = frame_lights.local_lighting(&s, rays.view_dir(s.position));
-        }
-        sky_run(&rays, env, &scene.textures, w, band * LIGHTING_ROWS, &sky_pixels, rows);
+        isa::dispatch(
+            #[inline(always)]
+            || {
+                let base = band * w * LIGHTING_ROWS;
+                let range = base..base + rows.len();
+                let (ids, pos, nrm, emi, amb, dif, spe) = (
+                    &g.object_id[range.clone()],
+                    &g.position[range.clone()],
+                    &g.normal[range.clone()],
+                    &g.emission[range.clone()],
+                    &g.ambient[range.clone()],
+                    &g.diffuse[range.clone()],
+                    &g.specular[range],
+                );
+                let mut sky_pixels = Vec::new();
+                let mut lit_pixels = Vec::with_capacity(rows.len());
+                for (k, &id) in ids.iter().enumerate() {
+                    if id == NO_OBJECT {
+                        // The skybox behind the pixel, four pixels at a time below.
+                        sky_pixels.push(k as u32);
+                    } else {
+                        lit_pixels.push(k);
+                    }
+                }
+                // The fields lighting reads, exactly as `GBuffer::surface` gives them.
+                let surface = |k: usize| {
+                    let (d, s) = (dif[k], spe[k]);
+                    Surface {
+                        position: pos[k],
+                        normal: nrm[k],
+                        emission: emi[k],
+                        ambient: amb[k],
+                        diffuse: d.truncate(),
+                        opacity: d.w,
+                        specular: s.truncate(),
+                        shininess: s.w,
+                        reflectivity: 0.0,
+                        ior: 1.0,
+                    }
+                };
+                // Covered pixels four at a time (`FrameLights::local_lighting4`: each lane exactly the
+                // one-pixel path), the rest one by one. With a single light, gathering the lanes costs
+                // more than it saves (tree-merge at 1080p: lighting 16.5 → 17.9 ms), so all one by one.
+                let vector = if frame_lights.len() >= VECTOR_LIGHTS_MIN { lit_pixels.len() / 4 * 4 } else { 0 };
+                for g in lit_pixels[..vector].chunks_exact(4) {
+                    let s = [surface(g[0]), surface(g[1]), surface(g[2]), surface(g[3])];
+                    // Indexed, not `s.map`: mapping an array of large `Surface`s became an out-of-line
+                    // call that copied them through memory (a store-forwarding stall per group).
+                    let view = [0, 1, 2, 3].map(|l| rays.view_dir(s[l].position));
+                    let c = frame_lights.local_lighting4(&s, view);
+                    for (&k, c) in g.iter().zip(c) {
+                        rows[k] = c;
+                    }
+                }
+                for &k in &lit_pixels[vector..] {
+                    let s = surface(k);
+                    rows[k] = frame_lights.local_lighting(&s, rays.view_dir(s.position));
+                }
+                sky_run(&rays, env, &scene.textures, w, band * LIGHTING_ROWS, &sky_pixels, rows);
+            },
+        )
     });
 }
 

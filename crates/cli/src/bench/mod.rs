@@ -205,6 +205,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
         cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         threads,
         cpu_model: cpu_model(),
+        cpu_isa: hybrid_cpu::isa::active().name(),
         load_average_start: machine_start,
         load_average_end: load_average(),
         git_head: git_commit(args.scene.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."))),

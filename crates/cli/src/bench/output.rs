@@ -10,6 +10,8 @@ pub(super) struct Machine {
     pub(super) cores: usize,
     pub(super) threads: usize,
     pub(super) cpu_model: Option<String>,
+    /// The CPU kernels' instruction-set path (`hybrid_cpu::isa`: "sse2", "avx2", "avx512", …).
+    pub(super) cpu_isa: &'static str,
     pub(super) load_average_start: Option<[f64; 3]>,
     pub(super) load_average_end: Option<[f64; 3]>,
     /// `git rev-parse HEAD` of the scene's repository when the bench ran (the binary may have been
@@ -180,12 +182,13 @@ pub(super) fn markdown(
     let load = |l: Option<[f64; 3]>| l.map_or("?".into(), |l| format!("{:.2}", l[0]));
     let _ = writeln!(
         s,
-        "# hybrid bench — {name}, {}×{}, backend {}, {} cores ({}), load average {} → {}{}\n",
+        "# hybrid bench — {name}, {}×{}, backend {}, {} cores ({}, {} kernels), load average {} → {}{}\n",
         args.size.0,
         args.size.1,
         machine.backend,
         machine.cores,
         machine.cpu_model.as_deref().unwrap_or("unknown CPU"),
+        machine.cpu_isa,
         load(machine.load_average_start),
         load(machine.load_average_end),
         machine.git_head.as_ref().map_or(String::new(), |c| format!(", git HEAD {}", &c[..c.len().min(10)]))

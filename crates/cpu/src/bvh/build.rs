@@ -2,6 +2,7 @@
 //! levels), then the collapse into 4-wide nodes and leaf packs. Deterministic for any thread count.
 
 use super::*;
+use crate::isa;
 
 pub(super) const BINS: usize = 16;
 /// Leaves are forced below this many triangles unless the centroids coincide.
@@ -62,9 +63,14 @@ impl PrimBounds {
     }
     pub(super) fn of(prims: &[Prim]) -> Self {
         let serial = |c: &[Prim]| {
-            let mut b = PrimBounds::EMPTY;
-            c.iter().for_each(|p| b.add(p));
-            b
+            isa::dispatch(
+                #[inline(always)]
+                || {
+                    let mut b = PrimBounds::EMPTY;
+                    c.iter().for_each(|p| b.add(p));
+                    b
+                },
+            )
         };
         if prims.len() >= PARALLEL_BIN_MIN {
             prims.par_chunks(PARALLEL_BIN_MIN).map(serial).reduce(|| PrimBounds::EMPTY, PrimBounds::merge)
@@ -332,6 +338,14 @@ impl Bins {
 pub(super) const BIN_TWO_WAY_MIN: usize = 64;
 
 pub(super) fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
+    isa::dispatch(
+        #[inline(always)]
+        || bin_prims_with(prims, lo, scale, nb),
+    )
+}
+
+#[inline(always)]
+fn bin_prims_with(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
     let mut bins = Bins::EMPTY;
     if prims.len() < BIN_TWO_WAY_MIN {
         prims.iter().for_each(|p| bins.add(p, lo, scale, nb));
@@ -395,6 +409,14 @@ pub(super) fn best_split(prims: &[Prim], cb: &Bounds, bounds: &Bounds, nb: usize
 /// In-place partition: elements with `pred` true first; returns how many, and the boxes of
 /// both sides (gathered on the way, so the children need no pass of their own).
 pub(super) fn partition(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> (usize, PrimBounds, PrimBounds) {
+    isa::dispatch(
+        #[inline(always)]
+        || partition_with(v, pred),
+    )
+}
+
+#[inline(always)]
+fn partition_with(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> (usize, PrimBounds, PrimBounds) {
     let (mut lb, mut rb) = (PrimBounds::EMPTY, PrimBounds::EMPTY);
     let mut i = 0;
     let mut j = v.len();

@@ -2,6 +2,7 @@
 //! that shadow rays use.
 
 use super::*;
+use crate::isa;
 
 impl SceneBvh {
     /// The closest triangle hit with `t_min < t < t_max` along `origin + t·dir`.
@@ -10,11 +11,15 @@ impl SceneBvh {
             return None;
         }
         HIT_STACK.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut stack) => self.closest_hit_with(&mut stack, origin, dir, t_min, t_max),
+            Ok(mut stack) => isa::dispatch(
+                #[inline(always)]
+                || self.closest_hit_with(&mut stack, origin, dir, t_min, t_max),
+            ),
             Err(_) => self.closest_hit_with(&mut [0; STACK_LEN], origin, dir, t_min, t_max),
         })
     }
 
+    #[inline(always)]
     pub(super) fn closest_hit_with(&self, stack: &mut [u64; STACK_LEN], origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
         let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
         let mut best_t = t_max;
