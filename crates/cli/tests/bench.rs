@@ -232,3 +232,32 @@ fn a_failing_bench_leaves_no_new_folder() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(nested.join("bench.json").is_file());
 }
+
+/// `--threads` sets the pool before the scene is loaded: loading a glTF scene uses rayon, and
+/// setting the pool afterwards failed with "The global thread pool has already been initialized"
+/// (exit 1) on the pavilion and both Sponza scenes.
+#[test]
+fn threads_apply_to_scenes_whose_loading_uses_rayon() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    let pavilion = scene("pavilion.toml");
+    let args = [
+        "bench",
+        pavilion.as_str(),
+        "--quiet",
+        "--backend",
+        "cpu",
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "16x9",
+        "--frames",
+        "1",
+        "--threads",
+        "1",
+    ];
+    let o = hybrid(&args);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(json["machine"]["threads"], 1, "{}", json["machine"]);
+}

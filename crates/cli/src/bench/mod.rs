@@ -54,6 +54,11 @@ use self::stats::*;
 
 pub fn run(args: BenchArgs) -> Result<(), CliError> {
     check_args(&args)?;
+    // Before anything uses rayon: loading a scene (BVH builds, smooth normals) starts the default
+    // global pool, after which `--threads` could no longer set it.
+    if let Some(n) = args.threads {
+        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
+    }
     let name = args.scene.display().to_string();
     let limit = memory_limit(args.max_memory);
     // The images kept for FLIP are not known before the plan: the frame alone first.
@@ -70,9 +75,6 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     // Everything is checked: now the output folder (created and probed before any rendering;
     // removed again if the run fails, when this run created it).
     let out_dir = OutputDir::prepare(&args.out, "--out")?;
-    if let Some(n) = args.threads {
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
-    }
 
     let machine_start = load_average();
     let options = RenderOptions::from(&args.capsule);
