@@ -255,6 +255,12 @@ fn threads_apply_to_scenes_whose_loading_uses_rayon() {
         "1",
         "--threads",
         "1",
+        "--modes",
+        "raster",
+        "--path-seconds",
+        "0.1",
+        "--fps",
+        "10",
     ];
     let o = hybrid(&args);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
