@@ -67,6 +67,36 @@ fn sphere_ray_t(o: vec3<f32>, d: vec3<f32>, center: vec3<f32>, radius: f32, t_mi
     return select(-1.0, t1, t1 >= t_min && t1 <= t_max);
 }
 
+/// A traversal's ray in unit-direction form: `d = dir / |dir|`, the t range in its units (both
+/// traversals, spheres_bvh.wgsl and spheres_rq.wgsl, start here). `ok` is false for a zero or
+/// non-finite direction or an empty range: nothing is hit.
+struct SphereRay {
+    ok: bool,
+    d: vec3<f32>,
+    len: f32,
+    t_min: f32,
+    t_max: f32,
+}
+
+fn sphere_ray(dir: vec3<f32>, tmin: f32, tmax: f32) -> SphereRay {
+    let len = sqrt(dot(dir, dir));
+    if !(len > 0.0 && is_finite(len) && tmax >= tmin) {
+        return SphereRay(false, vec3<f32>(0.0), 0.0, 0.0, 0.0);
+    }
+    return SphereRay(true, dir / len, len, tmin * len, tmax * len);
+}
+
+/// The sphere in `slot` as a candidate against the best hit so far (t, global id): its t when it
+/// is hit closer, or as close with a lower global index (the tie rule), else -1.
+fn sphere_candidate(origin: vec3<f32>, d: vec3<f32>, slot: u32, t_min: f32, best_t: f32, best_id: u32) -> f32 {
+    let s = spheres[slot];
+    let t = sphere_ray_t(origin, d, s.center, s.radius, t_min, best_t);
+    if t >= 0.0 && (t < best_t || (t == best_t && sphere_ids[slot] < best_id)) {
+        return t;
+    }
+    return -1.0;
+}
+
 /// The closest sphere along `origin + t·dir`, tmin ≤ t ≤ tmax (ties: lower global index).
 fn sphere_closest_hit(origin: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32) -> SphereHit {
     return sphere_trace(origin, dir, tmin, tmax, false);

@@ -24,16 +24,14 @@ fn sphere_slab(n: SphereNode, o: vec3<f32>, inv: vec3<f32>, t_min: f32, t_max: f
 /// Traversal shared by closest and any hit. `dir` need not be unit length; t is in its units.
 fn sphere_trace(origin: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32, any: bool) -> SphereHit {
     var result = SphereHit(false, 0.0, 0u);
-    if sphere_info.nodes == 0u {
+    let ray = sphere_ray(dir, tmin, tmax);
+    if sphere_info.nodes == 0u || !ray.ok {
         return result;
     }
-    let len = sqrt(dot(dir, dir));
-    if !(len > 0.0 && is_finite(len) && tmax >= tmin) {
-        return result;
-    }
-    let d = dir / len;
-    let t_min = tmin * len;
-    var best_t = tmax * len;
+    let d = ray.d;
+    let len = ray.len;
+    let t_min = ray.t_min;
+    var best_t = ray.t_max;
     var best_id = 0xffffffffu;
     var best_slot = 0u;
     let inv = vec3<f32>(sphere_safe_inv(d.x), sphere_safe_inv(d.y), sphere_safe_inv(d.z));
@@ -51,17 +49,13 @@ fn sphere_trace(origin: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32, any: bo
         var descend = false;
         if n.count > 0u {
             for (var slot = n.first; slot < n.first + n.count; slot++) {
-                let s = spheres[slot];
-                let t = sphere_ray_t(origin, d, s.center, s.radius, t_min, best_t);
+                let t = sphere_candidate(origin, d, slot, t_min, best_t, best_id);
                 if t >= 0.0 {
-                    let id = sphere_ids[slot];
-                    if t < best_t || (t == best_t && id < best_id) {
-                        best_t = t;
-                        best_id = id;
-                        best_slot = slot;
-                        if any {
-                            return SphereHit(true, best_t / len, best_slot);
-                        }
+                    best_t = t;
+                    best_id = sphere_ids[slot];
+                    best_slot = slot;
+                    if any {
+                        return SphereHit(true, best_t / len, best_slot);
                     }
                 }
             }

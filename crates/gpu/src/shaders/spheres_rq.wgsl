@@ -7,16 +7,14 @@
 
 fn sphere_trace(origin: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32, any: bool) -> SphereHit {
     var result = SphereHit(false, 0.0, 0u);
-    if sphere_info.nodes == 0u {
+    let ray = sphere_ray(dir, tmin, tmax);
+    if sphere_info.nodes == 0u || !ray.ok {
         return result;
     }
-    let len = sqrt(dot(dir, dir));
-    if !(len > 0.0 && is_finite(len) && tmax >= tmin) {
-        return result;
-    }
-    let d = dir / len;
-    let t_min = tmin * len;
-    var best_t = tmax * len;
+    let d = ray.d;
+    let len = ray.len;
+    let t_min = ray.t_min;
+    var best_t = ray.t_max;
     var best_id = 0xffffffffu;
     var best_slot = 0u;
     // The callers' rays start at t >= 0 (the capsule's near plane, the trace's biased origins);
@@ -34,23 +32,19 @@ fn sphere_trace(origin: vec3<f32>, dir: vec3<f32>, tmin: f32, tmax: f32, any: bo
             continue;
         }
         let slot = c.primitive_index;
-        let s = spheres[slot];
-        let t = sphere_ray_t(origin, d, s.center, s.radius, t_min, best_t);
+        let t = sphere_candidate(origin, d, slot, t_min, best_t, best_id);
         if t >= 0.0 {
-            let id = sphere_ids[slot];
-            if t < best_t || (t == best_t && id < best_id) {
-                best_t = t;
-                best_id = id;
-                best_slot = slot;
-                if any {
-                    rayQueryTerminate(&rq);
-                    return SphereHit(true, best_t / len, best_slot);
-                }
-                // `t` directly (emitted by the `if` above): naga 30 does not emit an expression
-                // computed in the call itself before this statement ("used by a statement before
-                // it was introduced"). A t beyond the query's range is skipped by naga's check.
-                rayQueryGenerateIntersection(&rq, t);
+            best_t = t;
+            best_id = sphere_ids[slot];
+            best_slot = slot;
+            if any {
+                rayQueryTerminate(&rq);
+                return SphereHit(true, best_t / len, best_slot);
             }
+            // `t` directly (a value computed before this statement): naga 30 does not emit an
+            // expression computed in the call itself ("used by a statement before it was
+            // introduced"). A t beyond the query's range is skipped by naga's check.
+            rayQueryGenerateIntersection(&rq, t);
         }
     }
     if best_id != 0xffffffffu {
