@@ -401,6 +401,16 @@ mod tests {
 /// creation fail or hang.
 pub const MAX_THREADS: usize = 1024;
 
+/// Sizes rayon's global pool to `--threads` (parsed by [`parse_threads`]). Call it before
+/// anything uses rayon: loading a scene (BVH builds, smooth normals) starts the default pool,
+/// after which it can no longer be sized.
+pub fn use_threads(threads: Option<usize>) -> Result<(), CliError> {
+    match threads {
+        Some(n) => rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string())),
+        None => Ok(()),
+    }
+}
+
 /// `--threads N`: 1 ..= [`MAX_THREADS`].
 fn parse_threads(s: &str) -> Result<usize, String> {
     let n: usize = s.trim().parse().map_err(|_| format!("`{s}` is not a whole number of threads"))?;

@@ -29,12 +29,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
         check_output_file(r, "--report", &["json"])?;
     }
     let dump_dir = args.dump.as_deref().map(|d| OutputDir::prepare(d, "--dump")).transpose()?;
-    if let Some(n) = args.threads {
-        if n == 0 {
-            return Err(CliError::bad_input("--threads must be at least 1"));
-        }
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
-    }
+    crate::args::use_threads(args.threads)?;
     args.heuristic.check()?;
     // Memory: a size that cannot fit whatever the scene is refused before the scene is loaded;
     // the scene's data is checked as it is built, the whole render once the backend is known.

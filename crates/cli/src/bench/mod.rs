@@ -54,11 +54,7 @@ use self::stats::*;
 
 pub fn run(args: BenchArgs) -> Result<(), CliError> {
     check_args(&args)?;
-    // Before anything uses rayon: loading a scene (BVH builds, smooth normals) starts the default
-    // global pool, after which `--threads` could no longer set it.
-    if let Some(n) = args.threads {
-        rayon::ThreadPoolBuilder::new().num_threads(n).build_global().map_err(|e| CliError::failure(e.to_string()))?;
-    }
+    crate::args::use_threads(args.threads)?;
     let name = args.scene.display().to_string();
     let limit = memory_limit(args.max_memory);
     // The images kept for FLIP are not known before the plan: the frame alone first.
