@@ -58,9 +58,8 @@ pub(super) fn load(path: &Path) -> Result<(Vec<Vec3>, Vec<[u8; 3]>), SceneError>
 fn check_header_extents(path: &Path, file_len: u64) -> Result<(), String> {
     use std::io::{Read, Seek, SeekFrom};
     let mut file = std::fs::File::open(path).map_err(|e| format!("cannot open LAS file: {e}"))?;
-    let mut head = [0u8; 255];
-    let n = file.read(&mut head).map_err(|e| format!("cannot read LAS header: {e}"))?;
-    let head = &head[..n];
+    let mut head = Vec::with_capacity(255);
+    (&mut file).take(255).read_to_end(&mut head).map_err(|e| format!("cannot read LAS header: {e}"))?;
     let u16_at = |i: usize| head.get(i..i + 2).map(|b| u16::from_le_bytes([b[0], b[1]]) as u64);
     let u32_at = |i: usize| head.get(i..i + 4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as u64);
     let u64_at = |i: usize| head.get(i..i + 8).map(|b| u64::from_le_bytes(b.try_into().unwrap()));
