@@ -242,6 +242,30 @@ pub struct CapsuleArgs {
     /// software: its ray queries run on the CPU, slower); says which.
     #[arg(long, value_enum, default_value_t = RtArg::Auto)]
     pub rt: RtArg,
+    /// What the pixels of objects the heuristic did not select get (issue 18). `raster`
+    /// (default): shadow maps (cascaded for directional lights, one per spot, a cube per point
+    /// light) and a reflection/refraction probe per reflective or refractive object, so effects
+    /// degrade instead of switching off, at the cost of rendering the maps (cached between
+    /// frames) and a lookup per pixel; `--mode raster` uses them everywhere. `none`: nothing,
+    /// as in paper 1 (for reproducing its tables).
+    #[arg(long, value_enum, default_value_t = FallbackArg::Raster)]
+    pub fallback: FallbackArg,
+}
+
+/// `--fallback`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FallbackArg {
+    Raster,
+    None,
+}
+
+impl FallbackArg {
+    pub fn fallback(self) -> hybrid_core::fallback::Fallback {
+        match self {
+            FallbackArg::Raster => hybrid_core::fallback::Fallback::Raster,
+            FallbackArg::None => hybrid_core::fallback::Fallback::None,
+        }
+    }
 }
 
 /// `--rt`.

@@ -187,6 +187,8 @@ pub struct RenderOptions {
     pub capsule_visibility: CapsuleVisibilityChoice,
     /// `--rt` (GPU backend).
     pub rt: RtChoice,
+    /// `--fallback`.
+    pub fallback: hybrid_core::fallback::Fallback,
 }
 
 impl From<&CapsuleArgs> for RenderOptions {
@@ -196,6 +198,7 @@ impl From<&CapsuleArgs> for RenderOptions {
             sphere_effects: !a.no_sphere_effects,
             capsule_visibility: a.capsule_visibility,
             rt: a.rt.choice(),
+            fallback: a.fallback.fallback(),
         }
     }
 }
@@ -214,6 +217,7 @@ impl<'s> AnyRenderer<'s> {
                 let mut r = CpuRenderer::new(scene).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
+                r.fallback = options.fallback;
                 r.set_capsule_visibility(options.capsule_visibility.primary_visibility());
                 AnyRenderer::Cpu(Box::new(r))
             }
@@ -222,6 +226,7 @@ impl<'s> AnyRenderer<'s> {
                     GpuRenderer::with_rt(ctx.clone(), scene, options.rt).map_err(|e| CliError::bad_input(format!("{file}: {e}")))?;
                 r.clip_capsule_at_raster_depth = options.clip_capsule;
                 r.spheres_in_trace = options.sphere_effects;
+                r.fallback = options.fallback;
                 AnyRenderer::Gpu(Box::new(r))
             }
         })

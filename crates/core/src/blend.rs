@@ -36,6 +36,24 @@ pub fn blend_pixel(lighting: Vec3, shadow: Vec3, reflection: Vec3, refraction: V
     combine(c, reflection, refraction, optical.x, 1.0 - optical.z)
 }
 
+/// [`blend_pixel`] with the raster fallbacks (issue 18): a polygon pixel the trace stage left
+/// out (mask < ε) takes the fallback terms `[shadow, reflection, refraction]` instead, through
+/// the same equations; without fallbacks (`None`) it stays the lighting, as in the paper.
+#[inline]
+pub fn blend_pixel_with_fallback(
+    lighting: Vec3,
+    traced: [Vec3; 3],
+    fallback: Option<[Vec3; 3]>,
+    object_id: u32,
+    optical: Vec3,
+    mask: f32,
+) -> Vec3 {
+    match fallback {
+        Some([s, m, r]) if mask < MASK_EPSILON && crate::buffers::is_polygon(object_id) => blend_pixel(lighting, s, m, r, optical, 1.0),
+        _ => blend_pixel(lighting, traced[0], traced[1], traced[2], optical, mask),
+    }
+}
+
 /// Linear colour → 8-bit sRGB (the blend stage's gamma correction): each channel
 /// `(linear_to_srgb(v) · 255 + 0.5)` truncated, non-finite values as 0, computed by
 /// [`encode_srgb_channel`].
@@ -133,6 +151,22 @@ mod tests {
         let s = Vec3::splat(0.7); // 0.3 of light blocked
         let out = blend_pixel(l, s, Vec3::ONE, Vec3::ONE, Vec3::new(0.0, 1.0, 1.0), 1.0);
         assert!(close(out, Vec3::splat(0.5)), "{out}");
+    }
+
+    #[test]
+    fn fallback_terms_apply_to_untraced_polygons_only() {
+        let l = Vec3::splat(0.8);
+        let traced = [Vec3::splat(0.9), Vec3::ZERO, Vec3::ZERO];
+        let fb = Some([Vec3::splat(0.7), Vec3::ZERO, Vec3::ZERO]);
+        let opaque = Vec3::new(0.0, 1.0, 1.0);
+        // Untraced polygon: the fallback shadow, L − (1 − 0.7) = 0.5.
+        assert!(close(blend_pixel_with_fallback(l, traced, fb, 3, opaque, 0.0), Vec3::splat(0.5)));
+        // Traced: the traced shadow, 0.8 − 0.1.
+        assert!(close(blend_pixel_with_fallback(l, traced, fb, 3, opaque, 1.0), Vec3::splat(0.7)));
+        // Sky, the RT-scene, or no fallbacks: the lighting.
+        assert_eq!(blend_pixel_with_fallback(l, traced, fb, crate::NO_OBJECT, opaque, 0.0), l);
+        assert_eq!(blend_pixel_with_fallback(l, traced, fb, crate::RT_SCENE_OBJECT, opaque, 0.0), l);
+        assert_eq!(blend_pixel_with_fallback(l, traced, None, 3, opaque, 0.0), l);
     }
 
     #[test]

@@ -132,6 +132,13 @@ pub struct FrameBuffers {
     pub shadow: Vec<Vec3>,
     pub reflection: Vec<Vec3>,
     pub refraction: Vec<Vec3>,
+    /// The raster fallbacks' terms (issue 18), the same quantities as `shadow`, `reflection` and
+    /// `refraction` from shadow maps and probes: written for every covered polygon pixel the
+    /// trace stage left out (1, 0, 0 elsewhere); empty when the frame has no fallbacks
+    /// (`--fallback none`, `rt-only`).
+    pub shadow_fallback: Vec<Vec3>,
+    pub reflection_fallback: Vec<Vec3>,
+    pub refraction_fallback: Vec<Vec3>,
     /// Final image, sRGB-encoded 8-bit RGBA (alpha 255).
     pub final_srgb: Vec<[u8; 4]>,
 }
@@ -146,6 +153,9 @@ impl FrameBuffers {
             shadow: vec![Vec3::ONE; n],
             reflection: vec![Vec3::ZERO; n],
             refraction: vec![Vec3::ZERO; n],
+            shadow_fallback: Vec::new(),
+            reflection_fallback: Vec::new(),
+            refraction_fallback: Vec::new(),
             final_srgb: vec![[0, 0, 0, 255]; n],
         }
     }
@@ -154,6 +164,12 @@ impl FrameBuffers {
 /// Object id written where the RT-scene (the point-cloud capsule, paper 2) is the visible
 /// surface after the depth merge.
 pub const RT_SCENE_OBJECT: u32 = u32::MAX - 1;
+
+/// Whether an object id names a scene object (a polygon), not the sky or the RT-scene.
+#[inline]
+pub fn is_polygon(object_id: u32) -> bool {
+    object_id != NO_OBJECT && object_id != RT_SCENE_OBJECT
+}
 
 /// The capsule's frame after unpacking (paper 2, block U): linear colour and reversed-Z depth
 /// per pixel; `depth == 0.0` where the capsule drew nothing (alpha ≤ 0.1 was discarded).

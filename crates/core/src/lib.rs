@@ -7,6 +7,7 @@ pub mod blend;
 pub mod buffer_view;
 pub mod buffers;
 pub mod depth_merge;
+pub mod fallback;
 pub mod frame;
 pub mod lanes;
 pub mod memory;
@@ -18,7 +19,7 @@ pub mod stage;
 #[cfg(any(test, feature = "test-support"))]
 pub mod test_rng;
 
-pub use buffers::{FrameBuffers, GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface};
+pub use buffers::{FrameBuffers, GBuffer, NO_OBJECT, RT_SCENE_OBJECT, RtLayer, Surface, is_polygon};
 pub use frame::{Frame, FrameSettings, Mode};
 pub use prepare::PreparedScene;
 pub use stage::Stage;

@@ -15,6 +15,9 @@ pub struct StageTimings {
     pub lighting: f64,
     pub heuristic: f64,
     pub trace: f64,
+    /// The raster fallbacks (issue 18): shadow maps and probes rendered this frame, and the
+    /// per-pixel lookups; 0 with `--fallback none`.
+    pub fallback: f64,
     pub blend: f64,
     pub frame: f64,
     /// GPU backend, hardware ray tracing only: building the acceleration structures (once per
@@ -73,6 +76,13 @@ pub struct FrameReport {
     pub objects: u64,
     pub heuristic: Option<hybrid_heuristic::HeuristicReport>,
     pub capsule: Option<CapsuleReport>,
+    /// What pixels the trace stage left out got (`--fallback`).
+    pub fallback: crate::fallback::Fallback,
+    /// Per visible object: which path its shadows, reflections and refractions took this frame
+    /// (`traced`, `raster` = shadow maps / probe, `none`).
+    pub effects: Vec<crate::fallback::ObjectEffects>,
+    /// Shadow maps and probes rendered this frame (0 when all came from the cache).
+    pub fallback_renders: FallbackRenders,
     /// GPU backend: per-stage GPU times (timestamp queries at pass boundaries), when the adapter
     /// offers timestamps. `timings_ms` stays wall-clock time on the host.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -80,6 +90,14 @@ pub struct FrameReport {
     /// GPU backend: which adapter rendered the frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub adapter: Option<AdapterReport>,
+}
+
+/// How many shadow maps (one per cascade, spot light or cube face) and probes a frame rendered;
+/// the rest came from the cache.
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq, Eq)]
+pub struct FallbackRenders {
+    pub shadow_maps: u64,
+    pub probes: u64,
 }
 
 /// The GPU adapter a frame ran on.

@@ -26,13 +26,17 @@ pub enum Stage {
     Heuristic,
     /// 3: shadow, reflection and refraction rays of masked pixels.
     Trace,
+    /// 3b (issue 18, beyond the paper): shadow maps and probes for the covered pixels the trace
+    /// stage left out (maps rendered when missing or moved, then a lookup per pixel).
+    Fallback,
     /// 4: lighting and traced terms combined (eq. 4–6), sRGB-encoded.
     Blend,
 }
 
 impl Stage {
     /// Every stage, in frame order.
-    pub const ALL: [Stage; 6] = [Stage::Capsule, Stage::Raster, Stage::Lighting, Stage::Heuristic, Stage::Trace, Stage::Blend];
+    pub const ALL: [Stage; 7] =
+        [Stage::Capsule, Stage::Raster, Stage::Lighting, Stage::Heuristic, Stage::Trace, Stage::Fallback, Stage::Blend];
 
     /// The stage's name in reports and progress lines (`StageTimings`' field name).
     pub fn name(self) -> &'static str {
@@ -42,6 +46,7 @@ impl Stage {
             Stage::Lighting => "lighting",
             Stage::Heuristic => "heuristic",
             Stage::Trace => "trace",
+            Stage::Fallback => "fallback",
             Stage::Blend => "blend",
         }
     }
@@ -64,6 +69,7 @@ impl Index<Stage> for StageTimings {
             Stage::Lighting => &self.lighting,
             Stage::Heuristic => &self.heuristic,
             Stage::Trace => &self.trace,
+            Stage::Fallback => &self.fallback,
             Stage::Blend => &self.blend,
         }
     }
@@ -77,6 +83,7 @@ impl IndexMut<Stage> for StageTimings {
             Stage::Lighting => &mut self.lighting,
             Stage::Heuristic => &mut self.heuristic,
             Stage::Trace => &mut self.trace,
+            Stage::Fallback => &mut self.fallback,
             Stage::Blend => &mut self.blend,
         }
     }

@@ -15,8 +15,12 @@ use rayon::prelude::*;
 
 use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule};
+use crate::fallback::FallbackCache;
 use crate::{blend, depth_merge, lighting, raster, trace};
+use hybrid_core::blend::MASK_EPSILON;
+use hybrid_core::fallback::{Fallback, ObjectEffects, object_effects};
 use hybrid_core::prepare::PreparedScene;
+use hybrid_core::report::FallbackRenders;
 
 /// The CPU backend with everything it keeps between frames: the prepared scene, its BVH, the
 /// point-cloud capsule and the heuristic's state (S per object, ms per cost unit).
@@ -34,6 +38,11 @@ pub struct CpuRenderer<'s> {
     /// reflections and refractions (default on). Off gives the paper's behaviour (the RT-scene
     /// only merges by depth): a faster trace stage, at the cost of those effects.
     pub spheres_in_trace: bool,
+    /// What pixels the trace stage left out get (`--fallback`, issue 18): shadow maps and probes
+    /// (default), or nothing (paper 1 exactly).
+    pub fallback: Fallback,
+    /// The fallbacks' maps and probes, made on first use and kept between frames.
+    fallback_cache: Option<FallbackCache>,
     /// A G-buffer handed back with [`CpuRenderer::recycle`], reused by the next raster (saves
     /// allocating and page-faulting ~100 MB per 1280×720 frame).
     spare_gbuffer: Option<GBuffer>,
@@ -72,6 +81,8 @@ impl<'s> CpuRenderer<'s> {
             heuristic: HeuristicStage::new(Heuristic::new(scene.heuristic.clone())),
             clip_capsule_at_raster_depth: false,
             spheres_in_trace: true,
+            fallback: Fallback::default(),
+            fallback_cache: None,
             spare_gbuffer: None,
             spare_buffers: None,
             spare_packed: None,
@@ -149,11 +160,16 @@ impl<'s> CpuRenderer<'s> {
             self.trace_stage(&gbuffer, camera, mode, [&mut buffers.shadow, &mut buffers.reflection, &mut buffers.refraction])
         });
 
+        on_stage(Stage::Fallback);
+        let fallback_renders = timed(&mut t[Stage::Fallback], || self.fallback_stage(&gbuffer, camera, mode, &mut buffers));
+
         on_stage(Stage::Blend);
         let b = &mut buffers;
+        let fallback = (!b.shadow_fallback.is_empty()).then_some([&b.shadow_fallback[..], &b.reflection_fallback, &b.refraction_fallback]);
         timed(&mut t[Stage::Blend], || {
-            blend::blend_into(&gbuffer, &b.lighting, &b.shadow, &b.reflection, &b.refraction, &mut b.final_srgb)
+            blend::blend_into(&gbuffer, &b.lighting, [&b.shadow, &b.reflection, &b.refraction], fallback, &mut b.final_srgb)
         });
+        let effects = effects_report(self.scene, &gbuffer, self.fallback_applies(mode));
 
         self.heuristic.record_trace(mode, heuristic_report.as_ref(), t[Stage::Trace]);
         t.frame = ms_since(frame_start);
@@ -168,6 +184,9 @@ impl<'s> CpuRenderer<'s> {
             objects: self.scene.objects.len() as u64,
             heuristic: heuristic_report,
             capsule: capsule_report,
+            fallback: self.fallback,
+            effects,
+            fallback_renders,
             gpu_timings_ms: None,
             adapter: None,
         };
@@ -255,6 +274,31 @@ impl<'s> CpuRenderer<'s> {
         choice.into_report()
     }
 
+    /// The fallback that applies in `mode` (`rt-only` traces every pixel: none).
+    fn fallback_applies(&self, mode: Mode) -> Fallback {
+        if mode == Mode::RtOnly { Fallback::None } else { self.fallback }
+    }
+
+    /// Stage 3b: the raster fallbacks for the pixels the trace stage left out, into the
+    /// frame's fallback buffers (left empty when there are none). Returns what it rendered.
+    fn fallback_stage(&mut self, gbuffer: &GBuffer, camera: &Camera, mode: Mode, buffers: &mut FrameBuffers) -> FallbackRenders {
+        let out = [&mut buffers.shadow_fallback, &mut buffers.reflection_fallback, &mut buffers.refraction_fallback];
+        if self.fallback_applies(mode) == Fallback::None {
+            out.into_iter().for_each(Vec::clear);
+            return FallbackRenders::default();
+        }
+        let spheres_cast = self.spheres_in_trace && self.capsule.is_some();
+        let cache = self.fallback_cache.get_or_insert_with(|| FallbackCache::new(&self.prepared, spheres_cast));
+        let capsule = self.capsule.as_mut().filter(|_| self.spheres_in_trace);
+        cache.stage(&self.prepared, capsule, gbuffer, camera, out)
+    }
+
+    /// The fallbacks' cache (shadow maps, probes and their render counts), once a frame has
+    /// needed it.
+    pub fn fallback_cache(&self) -> Option<&FallbackCache> {
+        self.fallback_cache.as_ref()
+    }
+
     /// Stage 3: shadow, reflection and refraction rays for masked pixels (listings 8a–d), into
     /// `[shadow, reflection, refraction]`.
     fn trace_stage(&self, gbuffer: &GBuffer, camera: &Camera, mode: Mode, out: [&mut Vec<Vec3>; 3]) -> RayCounts {
@@ -269,6 +313,18 @@ impl<'s> CpuRenderer<'s> {
         let spheres = self.capsule.as_ref().filter(|_| self.spheres_in_trace);
         trace::trace_with_spheres_into(&self.prepared, &self.bvh, spheres, gbuffer, camera, out)
     }
+}
+
+/// The report's per-object effect paths, from the G-buffer's ids and mask.
+fn effects_report(scene: &Scene, gbuffer: &GBuffer, fallback: Fallback) -> Vec<ObjectEffects> {
+    let n = scene.objects.len();
+    let (mut traced, mut untraced) = (vec![0u64; n], vec![0u64; n]);
+    for (&id, &m) in gbuffer.object_id.iter().zip(&gbuffer.mask) {
+        if hybrid_core::is_polygon(id) && (id as usize) < n {
+            if m >= MASK_EPSILON { traced[id as usize] += 1 } else { untraced[id as usize] += 1 }
+        }
+    }
+    object_effects(scene, &traced, &untraced, fallback)
 }
 
 fn timed<T>(slot: &mut f64, f: impl FnOnce() -> T) -> T {

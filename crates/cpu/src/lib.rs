@@ -6,6 +6,7 @@ pub mod bvh;
 pub mod camera_rays;
 pub mod capsule;
 pub mod depth_merge;
+pub mod fallback;
 pub mod frame;
 pub mod isa;
 pub mod lighting;

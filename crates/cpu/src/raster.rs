@@ -261,6 +261,7 @@ struct ClipVert {
 
 /// Fills `chunk` (its vectors reused from frame to frame) with the screen triangles of scene
 /// triangles `first..first + SETUP_CHUNK` and their band bins.
+#[allow(clippy::too_many_arguments)]
 fn setup_chunk(
     chunk: &mut Chunk,
     first: usize,
@@ -269,6 +270,7 @@ fn setup_chunk(
     mesh_base: &[usize],
     vpt: &Viewport,
     bands: usize,
+    include: Option<&[bool]>,
 ) {
     let end = (first + SETUP_CHUNK).min(prepared.triangles.len());
     let Chunk { raster, shade, band_start, entries } = chunk;
@@ -278,6 +280,9 @@ fn setup_chunk(
     raster.reserve(end - first);
     shade.reserve(end - first);
     for t in &prepared.triangles[first..end] {
+        if include.is_some_and(|inc| !inc.get(t.mesh as usize).copied().unwrap_or(false)) {
+            continue;
+        }
         let mesh = &prepared.meshes[t.mesh as usize];
         let idx = mesh.indices[t.triangle as usize];
         let mv = &verts[mesh_base[t.mesh as usize]..mesh_base[t.mesh as usize + 1]];
@@ -589,24 +594,55 @@ fn covered_span(e: [i64; 3], step: [i64; 3], last: usize) -> Option<(usize, usiz
 }
 
 fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLayer>, g: &mut GBuffer, clear: bool) {
-    let (width, height) = (g.width, g.height);
-    let n = g.len();
-    if width == 0 || height == 0 || n != width as usize * height as usize {
-        return;
-    }
-    let rt_layer = rt_layer.filter(|l| layer_fits(l, width, height));
-    let vpt = Viewport {
-        vp: camera.view_projection(width as f32 / height as f32),
-        width,
-        height,
-        gx: 1.0 + 2.0 * GUARD_PX / width as f32,
-        gy: 1.0 + 2.0 * GUARD_PX / height as f32,
-    };
+    raster_meshes_into(prepared, camera, rt_layer, g, clear, None);
+}
 
-    // Per-frame scratch (vertices, setup chunks) kept by the calling thread between frames, so
-    // a frame allocates (and page-faults) nothing but what it outputs.
+/// [`rasterize`] of the meshes whose `include[mesh]` is true only (all when `None`): a
+/// reflection probe's face leaves its own object out.
+pub fn rasterize_meshes(prepared: &PreparedScene, camera: &Camera, width: u32, height: u32, include: &[bool]) -> GBuffer {
+    let mut g = GBuffer::new(width, height);
+    raster_meshes_into(prepared, camera, None, &mut g, false, Some(include));
+    g
+}
+
+/// Depth only (a shadow map): the reversed-Z depth of the nearest triangle of the meshes whose
+/// `include[mesh]` is true, seen through `view_proj` on a `size`² map (0 where none is). Same
+/// setup, clipping, fill rule and depth planes as the G-buffer raster.
+pub fn rasterize_depth(prepared: &PreparedScene, view_proj: Mat4, size: u32, include: &[bool]) -> Vec<f32> {
+    let mut out = vec![0.0f32; size as usize * size as usize];
+    if size == 0 {
+        return out;
+    }
+    let vpt = viewport(view_proj, size, size);
     let mut scratch = SCRATCH.with(|s| std::mem::take(&mut *s.borrow_mut()));
-    let Scratch { verts, mesh_base, chunks } = &mut scratch;
+    if setup_pass(prepared, &vpt, Some(include), &mut scratch) {
+        let chunks = &*scratch.chunks;
+        let w = size as usize;
+        out.par_chunks_mut(w * BAND_ROWS as usize).enumerate().with_max_len(1).for_each_init(BandScratch::default, |s, (band, rows)| {
+            let y_lo = band as u32 * BAND_ROWS;
+            let y_hi = y_lo + (rows.len() / w) as u32;
+            s.ids.clear();
+            s.ids.resize(rows.len(), VIS_NONE);
+            for (ci, chunk) in chunks.iter().enumerate() {
+                let first = (ci as u32) << CHUNK_SHIFT;
+                for &local in chunk.bin(band) {
+                    depth_test(&chunk.raster[local as usize], first + local, y_lo, y_hi, w, rows, &mut s.ids);
+                }
+            }
+        });
+    }
+    SCRATCH.with(|s| *s.borrow_mut() = scratch);
+    out
+}
+
+fn viewport(vp: Mat4, width: u32, height: u32) -> Viewport {
+    Viewport { vp, width, height, gx: 1.0 + 2.0 * GUARD_PX / width as f32, gy: 1.0 + 2.0 * GUARD_PX / height as f32 }
+}
+
+/// Passes 1 and 2 into `scratch`: vertices, then setup and binning of the triangles of the
+/// included meshes (all when `None`). False when the scene has too many triangles.
+fn setup_pass(prepared: &PreparedScene, vpt: &Viewport, include: Option<&[bool]>, scratch: &mut Scratch) -> bool {
+    let Scratch { verts, mesh_base, chunks } = scratch;
 
     // Pass 1: vertices, once per vertex, in parallel over fixed slices.
     mesh_base.clear();
@@ -622,7 +658,10 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
         slices.push(mine);
         rest = tail;
     }
-    slices.into_par_iter().zip(&prepared.meshes).for_each(|(out, m)| {
+    slices.into_par_iter().zip(&prepared.meshes).enumerate().for_each(|(mi, (out, m))| {
+        if include.is_some_and(|inc| !inc.get(mi).copied().unwrap_or(false)) {
+            return;
+        }
         out.par_chunks_mut(VERTEX_CHUNK).zip(m.positions.par_chunks(VERTEX_CHUNK)).for_each(|(o, p)| {
             for (o, p) in o.iter_mut().zip(p) {
                 *o = vpt.vertex(*p);
@@ -631,19 +670,45 @@ fn raster_into(prepared: &PreparedScene, camera: &Camera, rt_layer: Option<&RtLa
     });
 
     // Pass 2: setup and binning, in fixed chunks of the scene's triangle order.
-    let bands = height.div_ceil(BAND_ROWS) as usize;
+    let bands = vpt.height.div_ceil(BAND_ROWS) as usize;
     let n_chunks = prepared.triangles.len().div_ceil(SETUP_CHUNK);
     if n_chunks >= (VIS_RT >> CHUNK_SHIFT) as usize {
         tracing::error!(triangles = prepared.triangles.len(), "too many triangles for the rasteriser's visibility ids");
-        return;
+        return false;
     }
     chunks.truncate(n_chunks);
     chunks.resize_with(n_chunks, Chunk::default);
     let (verts, mesh_base) = (&*verts, &*mesh_base);
     chunks.par_iter_mut().enumerate().with_max_len(1).for_each(|(k, chunk)| {
-        setup_chunk(chunk, k * SETUP_CHUNK, prepared, verts, mesh_base, &vpt, bands);
+        setup_chunk(chunk, k * SETUP_CHUNK, prepared, verts, mesh_base, vpt, bands, include);
     });
-    let chunks = &*chunks;
+    true
+}
+
+fn raster_meshes_into(
+    prepared: &PreparedScene,
+    camera: &Camera,
+    rt_layer: Option<&RtLayer>,
+    g: &mut GBuffer,
+    clear: bool,
+    include: Option<&[bool]>,
+) {
+    let (width, height) = (g.width, g.height);
+    let n = g.len();
+    if width == 0 || height == 0 || n != width as usize * height as usize {
+        return;
+    }
+    let rt_layer = rt_layer.filter(|l| layer_fits(l, width, height));
+    let vpt = viewport(camera.view_projection(width as f32 / height as f32), width, height);
+
+    // Per-frame scratch (vertices, setup chunks) kept by the calling thread between frames, so
+    // a frame allocates (and page-faults) nothing but what it outputs.
+    let mut scratch = SCRATCH.with(|s| std::mem::take(&mut *s.borrow_mut()));
+    if !setup_pass(prepared, &vpt, include, &mut scratch) {
+        SCRATCH.with(|s| *s.borrow_mut() = scratch);
+        return;
+    }
+    let chunks = &*scratch.chunks;
 
     // Pass 3: bands (visibility, then shading of the winners).
     let rays = PrimaryRays::new(camera, width, height);

@@ -60,6 +60,9 @@ pub struct GpuRenderer<'s> {
     /// reflections and refractions (default on). Off gives the paper's behaviour (the RT-scene
     /// only merges by depth): a faster trace stage, at the cost of those effects.
     pub spheres_in_trace: bool,
+    /// What pixels the trace stage left out get (`--fallback`, issue 18): shadow maps and probes
+    /// (default), or nothing (paper 1 exactly).
+    pub fallback: hybrid_core::fallback::Fallback,
     /// Beyond paper 2: trace the capsule after the raster, with rays clipped at the polygon
     /// depth. Saves the rays that would end behind polygons, at the cost of running the capsule
     /// after (not beside) the raster.
@@ -120,6 +123,7 @@ impl<'s> GpuRenderer<'s> {
             targets: None,
             prepare_ms: start.elapsed().as_secs_f64() * 1e3,
             spheres_in_trace: true,
+            fallback: hybrid_core::fallback::Fallback::default(),
             clip_capsule_at_raster_depth: false,
             trace,
             trace_without_spheres,
@@ -309,6 +313,9 @@ impl<'s> GpuRenderer<'s> {
             objects: self.scene.objects.len() as u64,
             heuristic: heuristic_report,
             capsule,
+            fallback: hybrid_core::fallback::Fallback::None,
+            effects: Vec::new(),
+            fallback_renders: Default::default(),
             gpu_timings_ms: gpu_timings,
             adapter: Some(AdapterReport {
                 name: s.name.clone(),

@@ -122,6 +122,9 @@ pub fn read_frame_buffers(ctx: &GpuContext, t: &FrameTargets) -> Result<FrameBuf
         shadow: rgb(read_rgba_f32(ctx, &t.shadow)?),
         reflection: rgb(read_rgba_f32(ctx, &t.reflection)?),
         refraction: rgb(read_rgba_f32(ctx, &t.refraction)?),
+        shadow_fallback: Vec::new(),
+        reflection_fallback: Vec::new(),
+        refraction_fallback: Vec::new(),
         final_srgb: read_rgba8(ctx, &t.final_image)?,
     })
 }

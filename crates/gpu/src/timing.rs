@@ -135,6 +135,7 @@ fn stage_times(passes: &[Stage], ticks: &[u64], period_ns: f32) -> StageTimings 
         lighting: span(&[Stage::Lighting]),
         heuristic: span(&[Stage::Heuristic]),
         trace: span(&[Stage::Trace]),
+        fallback: span(&[Stage::Fallback]),
         blend: span(&[Stage::Blend]),
         frame: span(&[]),
         build_as: None,

@@ -208,7 +208,7 @@ fn hand_computed_blend_pixels() {
         shadow: vec![Vec3::new(0.75, 1.0, 1.0), Vec3::ONE, Vec3::ONE, Vec3::ONE],
         reflection: vec![Vec3::new(1.0, 0.0, 0.0), Vec3::ONE, Vec3::ONE, Vec3::new(0.003_130_8, 1.0, 0.5)],
         refraction: vec![Vec3::new(0.25, 0.0, 1.0), Vec3::ONE, Vec3::ONE, Vec3::ZERO],
-        final_srgb: Vec::new(),
+        ..FrameBuffers::default()
     };
     let expected = [[200, 86, 120, 255], [188, 137, 0, 255], [0, 255, 0, 255], [10, 255, 188, 255]];
     // The CPU twin agrees with the hand values (f16-exact inputs but pixel 3's 0.0031308, whose

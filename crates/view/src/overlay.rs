@@ -65,12 +65,13 @@ pub struct Overlay {
     budget_ms: f64,
 }
 
-const STAGE_COLORS: [egui::Color32; 6] = [
+const STAGE_COLORS: [egui::Color32; 7] = [
     egui::Color32::from_rgb(160, 110, 220), // capsule
     egui::Color32::from_rgb(90, 150, 230),  // raster
     egui::Color32::from_rgb(90, 200, 160),  // lighting
     egui::Color32::from_rgb(230, 200, 80),  // heuristic
     egui::Color32::from_rgb(235, 120, 70),  // trace
+    egui::Color32::from_rgb(120, 170, 90),  // fallback
     egui::Color32::from_rgb(200, 200, 200), // blend
 ];
 

@@ -1,0 +1,758 @@
+//! Raster fallbacks (issue 18, beyond paper 1): what an object the heuristic did not select gets
+//! instead of ray-traced effects. Shadows come from **shadow maps** (directional: cascades fitted
+//! to the view; spot: one perspective map; point: a cube of six), reflections and refractions
+//! from a **probe** per reflective or refractive object (a cube map of the lit scene rendered
+//! with the raster path from the object's centre, box-projected where the object is room-sized).
+//!
+//! Everything here is backend-free: which views each light's maps have ([`plan_light_views`]),
+//! where each probe sits ([`plan_probes`]), and the per-pixel lookups ([`FallbackScene::pixel`]).
+//! Each backend renders the depth maps and the probes' faces with its own raster and runs the
+//! same lookups (the GPU's WGSL mirrors them).
+//!
+//! Conventions: every map is reversed-Z (near 1, far 0, 0 where nothing was drawn), row 0 at the
+//! top, texel `(x, y)` centred at `((x + 0.5)/size, (y + 0.5)/size)` in UV.
+
+use glam::{Mat4, Vec2, Vec3, Vec4Swizzles};
+use hybrid_scene::{Aabb, Camera, Projection, Scene};
+
+use crate::Surface;
+use crate::prepare::PreparedScene;
+use crate::shading::{FrameLights, Light, facing, lights, reflect, refract_or_reflect, sky};
+
+/// What pixels of objects the heuristic did not select get (`--fallback`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Fallback {
+    /// Shadow maps and probes: effects degrade instead of switching off, at the cost of
+    /// rendering the maps (cached) and a lookup per pixel.
+    #[default]
+    Raster,
+    /// Nothing: unselected objects get neither shadows, reflections nor refractions (paper 1
+    /// exactly, for reproducing its tables).
+    None,
+}
+
+impl Fallback {
+    pub const NAMES: [&'static str; 2] = ["raster", "none"];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Fallback::Raster => "raster",
+            Fallback::None => "none",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "raster" => Some(Fallback::Raster),
+            "none" => Some(Fallback::None),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for Fallback {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// The fallbacks' resolution knobs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FallbackSettings {
+    /// Texels per side of each directional cascade and of a spot light's map. Higher values give
+    /// sharper, less blocky shadow edges at the cost of memory (4 bytes per texel) and of the
+    /// time to render each map.
+    pub shadow_map_size: u32,
+    /// Texels per side of each of a point light's six cube faces (six maps per light: kept
+    /// smaller for the same reason).
+    pub cube_shadow_size: u32,
+    /// Cascades per directional light (1–4). More cascades keep near shadows sharp over a long
+    /// view at the cost of one map each.
+    pub cascades: u32,
+    /// PCF kernel radius in taps: 0 = one bilinear comparison (2×2 texels, the sharpest edge),
+    /// r = (2r + 1)² bilinear comparisons a texel apart (softer edges, hides aliasing, at the
+    /// cost of (2r + 1)² times the lookups).
+    pub pcf_radius: u32,
+    /// Texels per side of each probe face. Higher values sharpen mirror reflections at the cost
+    /// of rendering six faces of that size per reflective or refractive object (once: cached).
+    pub probe_size: u32,
+}
+
+impl Default for FallbackSettings {
+    fn default() -> Self {
+        Self { shadow_map_size: 1024, cube_shadow_size: 512, cascades: 3, pcf_radius: 0, probe_size: 128 }
+    }
+}
+
+/// Constant depth bias, in texels of world size at the receiver.
+pub const SHADOW_BIAS_TEXELS: f32 = 1.0;
+/// Slope-scaled bias: texels per unit of tan(angle between normal and light).
+pub const SHADOW_SLOPE_BIAS_TEXELS: f32 = 1.5;
+/// Normal offset of the receiver before projecting, in texels of world size.
+pub const SHADOW_NORMAL_OFFSET_TEXELS: f32 = 1.0;
+/// The slope term's tangent is clamped to this (grazing light would push the bias to infinity).
+pub const SHADOW_MAX_SLOPE: f32 = 8.0;
+
+/// One depth map of a light: world → clip (reversed-Z, looking from the light).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShadowView {
+    pub view_proj: Mat4,
+    /// Texels per side (square).
+    pub size: u32,
+    pub orthographic: bool,
+    pub near: f32,
+    pub far: f32,
+    /// Orthographic: a texel's world size. Perspective: a texel's world size at unit distance.
+    pub texel_world: f32,
+    /// Cascades: the camera view distance up to which this cascade is used (the last one covers
+    /// everything); ∞ for the other kinds.
+    pub split_far: f32,
+}
+
+impl ShadowView {
+    fn new(camera: &Camera, size: u32, split_far: f32) -> Self {
+        let (near, far) = camera.near_far();
+        let (orthographic, texel_world) = match camera.projection {
+            Projection::Orthographic { height, .. } => (true, height / size as f32),
+            Projection::Perspective { fov_y_deg, .. } => (false, 2.0 * (fov_y_deg.to_radians() * 0.5).tan() / size as f32),
+        };
+        Self { view_proj: camera.view_projection(1.0), size, orthographic, near, far, texel_world, split_far }
+    }
+
+    /// Distance along the view axis for reversed-Z depth `z` of this view.
+    #[inline]
+    pub fn linear_depth(&self, z: f32) -> f32 {
+        let (n, f) = (self.near, self.far);
+        if self.orthographic { f - z * (f - n) } else { n * f / ((f - n) * z + n) }
+    }
+
+    /// Reversed-Z depth of distance `d` along the view axis (inverse of [`Self::linear_depth`]).
+    #[inline]
+    pub fn depth_of(&self, d: f32) -> f32 {
+        let (n, f) = (self.near, self.far);
+        if self.orthographic { (f - d) / (f - n) } else { n * f / ((f - n) * d.max(1e-6)) - n / (f - n) }
+    }
+
+    /// The bytes that identify the view (a cached map is reused while they stay the same).
+    pub fn key(&self) -> [u32; 20] {
+        let mut k = [0u32; 20];
+        for (o, v) in k.iter_mut().zip(self.view_proj.to_cols_array()) {
+            *o = v.to_bits();
+        }
+        (k[16], k[17], k[18], k[19]) = (self.size, self.near.to_bits(), self.far.to_bits(), self.split_far.to_bits());
+        k
+    }
+}
+
+/// Which light a set of views belongs to, and how a point picks its view.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShadowKind {
+    /// Cascades, nearest first; a point picks by its camera view distance.
+    Directional,
+    /// One perspective map.
+    Spot,
+    /// Six faces in the order +X, −X, +Y, −Y, +Z, −Z; a point picks by the major axis of its
+    /// direction from the light.
+    Point,
+}
+
+/// The views of one shadow-casting light (index `light` in [`lights`] order).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightViews {
+    pub light: usize,
+    pub kind: ShadowKind,
+    pub views: Vec<ShadowView>,
+}
+
+/// The polygons' world bounds (every object with geometry) and, when given, the point clouds'.
+pub fn scene_bounds(prepared: &PreparedScene, with_point_clouds: bool) -> Aabb {
+    let mut b = prepared.object_bounds.iter().filter(|b| !b.is_empty()).fold(Aabb::EMPTY, |a, b| a.union(b));
+    if with_point_clouds {
+        for c in &prepared.scene.point_clouds {
+            let cb = c.bounds();
+            if !cb.is_empty() {
+                b = b.union(&cb);
+            }
+        }
+    }
+    b
+}
+
+fn corners(b: &Aabb) -> [Vec3; 8] {
+    std::array::from_fn(|i| {
+        Vec3::new(
+            if i & 1 == 0 { b.min.x } else { b.max.x },
+            if i & 2 == 0 { b.min.y } else { b.max.y },
+            if i & 4 == 0 { b.min.z } else { b.max.z },
+        )
+    })
+}
+
+/// An up vector not parallel to `dir`.
+fn up_for(dir: Vec3) -> Vec3 {
+    if dir.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y }
+}
+
+/// The six cube-face directions (+X, −X, +Y, −Y, +Z, −Z) and their up vectors.
+pub const CUBE_FACES: [(Vec3, Vec3); 6] = [
+    (Vec3::X, Vec3::NEG_Y),
+    (Vec3::NEG_X, Vec3::NEG_Y),
+    (Vec3::Y, Vec3::Z),
+    (Vec3::NEG_Y, Vec3::NEG_Z),
+    (Vec3::Z, Vec3::NEG_Y),
+    (Vec3::NEG_Z, Vec3::NEG_Y),
+];
+
+/// The cube face (index into [`CUBE_FACES`]) a direction falls on: its major axis.
+#[inline]
+pub fn cube_face(d: Vec3) -> usize {
+    let a = d.abs();
+    if a.x >= a.y && a.x >= a.z {
+        if d.x > 0.0 { 0 } else { 1 }
+    } else if a.y >= a.z {
+        if d.y > 0.0 { 2 } else { 3 }
+    } else if d.z > 0.0 {
+        4
+    } else {
+        5
+    }
+}
+
+/// The 90° camera of cube face `face` at `position`.
+pub fn cube_face_camera(position: Vec3, face: usize, near: f32, far: f32) -> Camera {
+    let (dir, up) = CUBE_FACES[face];
+    Camera { position, target: position + dir, up, projection: Projection::Perspective { fov_y_deg: 90.0, near, far } }
+}
+
+/// Near and far planes for a perspective map from `from` that must see all of `bounds`.
+fn perspective_range(from: Vec3, bounds: &Aabb) -> (f32, f32) {
+    let far = corners(bounds).iter().map(|c| c.distance(from)).fold(0.0f32, f32::max).max(1e-3) * 1.01;
+    (far * 1e-4, far)
+}
+
+/// The views of every shadow-casting light for a frame seen by `camera` at `aspect`. Spot and
+/// point views depend only on the light and the scene; directional cascades also on the camera
+/// (fitted to slices of its view, their centres snapped to a grid of a quarter of their radius
+/// so they move, and must be re-rendered, only when the view has moved that far).
+pub fn plan_light_views(scene: &Scene, bounds: &Aabb, camera: &Camera, aspect: f32, settings: &FallbackSettings) -> Vec<LightViews> {
+    let mut out = Vec::new();
+    if bounds.is_empty() {
+        return out;
+    }
+    for (k, light) in lights(&scene.lights).enumerate() {
+        if !light.casts_shadows() {
+            continue;
+        }
+        let (kind, views) = match light {
+            Light::Directional(l) => (ShadowKind::Directional, cascades(l.direction, bounds, camera, aspect, settings)),
+            Light::Spot(l) => {
+                let (near, far) = perspective_range(l.position, bounds);
+                let fov = (2.0 * l.outer_angle.to_degrees() + 2.0).clamp(1.0, 170.0);
+                let cam = Camera {
+                    position: l.position,
+                    target: l.position + l.direction,
+                    up: up_for(l.direction),
+                    projection: Projection::Perspective { fov_y_deg: fov, near, far },
+                };
+                (ShadowKind::Spot, vec![ShadowView::new(&cam, settings.shadow_map_size, f32::INFINITY)])
+            }
+            Light::Point(l) => {
+                let (near, far) = perspective_range(l.position, bounds);
+                let views = (0..6)
+                    .map(|f| ShadowView::new(&cube_face_camera(l.position, f, near, far), settings.cube_shadow_size, f32::INFINITY))
+                    .collect();
+                (ShadowKind::Point, views)
+            }
+        };
+        if !views.is_empty() {
+            out.push(LightViews { light: k, kind, views });
+        }
+    }
+    out
+}
+
+/// Split distances of `count` cascades over [near, far]: the practical split (half logarithmic,
+/// half uniform).
+pub fn cascade_splits(near: f32, far: f32, count: u32) -> Vec<f32> {
+    let count = count.clamp(1, 4);
+    (1..=count)
+        .map(|i| {
+            let t = i as f32 / count as f32;
+            let log = near * (far / near).powf(t);
+            let uni = near + (far - near) * t;
+            0.5 * (log + uni)
+        })
+        .collect()
+}
+
+fn cascades(direction: Vec3, bounds: &Aabb, camera: &Camera, aspect: f32, settings: &FallbackSettings) -> Vec<ShadowView> {
+    let dir = direction.normalize_or(Vec3::NEG_Y);
+    let forward = camera.forward();
+    let (cam_near, cam_far) = camera.near_far();
+    // Shadows are needed up to the farthest scene point in front of the camera.
+    let reach = corners(bounds).iter().map(|c| (*c - camera.position).dot(forward)).fold(0.0f32, f32::max);
+    let far = reach.min(cam_far).max(cam_near * 2.0);
+    let near = cam_near.max(far * 1e-4);
+    // Light basis, as look_at_rh builds it.
+    let up = up_for(dir);
+    let s = dir.cross(up).normalize();
+    let u = s.cross(dir);
+    let right = camera.up.cross(-forward).normalize_or(Vec3::X);
+    let cam_up = (-forward).cross(right);
+    // Scene extent along the light: every caster lies between these.
+    let along: Vec<f32> = corners(bounds).iter().map(|c| c.dot(dir)).collect();
+    let (d_min, d_max) = along.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+    let margin = (d_max - d_min) * 0.01 + 1e-3;
+    let mut start = near;
+    cascade_splits(near, far, settings.cascades)
+        .into_iter()
+        .map(|end| {
+            // The slice's eight corners and their bounding sphere (its radius depends only on
+            // the slice, not on the view's rotation).
+            let half = |d: f32| match camera.projection {
+                Projection::Perspective { fov_y_deg, .. } => {
+                    let t = (fov_y_deg.to_radians() * 0.5).tan() * d;
+                    (t * aspect, t)
+                }
+                Projection::Orthographic { height, .. } => (height * 0.5 * aspect, height * 0.5),
+            };
+            let mut pts = [Vec3::ZERO; 8];
+            for (i, p) in pts.iter_mut().enumerate() {
+                let d = if i < 4 { start } else { end };
+                let (hx, hy) = half(d);
+                let sx = if i & 1 == 0 { -hx } else { hx };
+                let sy = if i & 2 == 0 { -hy } else { hy };
+                *p = camera.position + forward * d + right * sx + cam_up * sy;
+            }
+            let centre = pts.iter().copied().sum::<Vec3>() / 8.0;
+            let radius = pts.iter().map(|p| p.distance(centre)).fold(0.0f32, f32::max).max(1e-3);
+            // Snap the centre (in the light's plane) to a grid of radius/4, and grow the
+            // radius by the snap so the slice stays inside.
+            let step = radius * 0.25;
+            let (cx, cy) = ((centre.dot(s) / step).round() * step, (centre.dot(u) / step).round() * step);
+            let r = radius + step * std::f32::consts::SQRT_2;
+            let eye = s * cx + u * cy + dir * (d_min - margin);
+            let cam = Camera {
+                position: eye,
+                target: eye + dir,
+                up,
+                projection: Projection::Orthographic { height: 2.0 * r, near: 0.0, far: d_max - d_min + 2.0 * margin },
+            };
+            start = end;
+            ShadowView::new(&cam, settings.shadow_map_size, end)
+        })
+        .collect()
+}
+
+/// A rendered depth map: [`ShadowView`] and its texels (reversed-Z, row 0 at the top).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShadowMap {
+    pub view: ShadowView,
+    pub depth: Vec<f32>,
+}
+
+/// UV and reversed-Z depth of a world point in a view (`None` behind a perspective view).
+#[inline]
+pub fn project(view_proj: &Mat4, p: Vec3) -> Option<(Vec2, f32)> {
+    let c = *view_proj * p.extend(1.0);
+    if c.w <= 0.0 {
+        return None;
+    }
+    let ndc = c.xyz() / c.w;
+    Some((Vec2::new(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5), ndc.z))
+}
+
+impl ShadowMap {
+    /// 1 where texel `(x, y)` (clamped to the map) is no nearer than `z_ref`, else 0.
+    #[inline]
+    fn lit(&self, x: i32, y: i32, z_ref: f32) -> f32 {
+        let n = self.view.size as i32;
+        let (x, y) = (x.clamp(0, n - 1), y.clamp(0, n - 1));
+        if self.depth[(y * n + x) as usize] <= z_ref { 1.0 } else { 0.0 }
+    }
+
+    /// A bilinear comparison (hardware-style PCF): the four texels around `uv` compared with
+    /// `z_ref`, weighted by their bilinear weights.
+    #[inline]
+    pub fn compare_bilinear(&self, uv: Vec2, z_ref: f32) -> f32 {
+        let n = self.view.size as f32;
+        let t = uv * n - Vec2::splat(0.5);
+        let (x0, y0) = (t.x.floor(), t.y.floor());
+        let (fx, fy) = (t.x - x0, t.y - y0);
+        let (x0, y0) = (x0 as i32, y0 as i32);
+        let a = self.lit(x0, y0, z_ref) * (1.0 - fx) + self.lit(x0 + 1, y0, z_ref) * fx;
+        let b = self.lit(x0, y0 + 1, z_ref) * (1.0 - fx) + self.lit(x0 + 1, y0 + 1, z_ref) * fx;
+        a * (1.0 - fy) + b * fy
+    }
+
+    /// Visibility (0 shadowed … 1 lit) of surface point `p` with normal `n` (facing the light),
+    /// `to_light` the unit direction towards the light: normal offset, slope-scaled bias, PCF.
+    /// Points outside the map are lit.
+    pub fn visibility(&self, p: Vec3, n: Vec3, to_light: Vec3, pcf_radius: u32) -> f32 {
+        let v = &self.view;
+        // The texel's world size at the receiver.
+        let texel = if v.orthographic {
+            v.texel_world
+        } else {
+            let c = v.view_proj * p.extend(1.0);
+            v.texel_world * c.w.max(v.near)
+        };
+        let cos = n.dot(to_light).clamp(1e-3, 1.0);
+        let tan = ((1.0 - cos * cos).max(0.0).sqrt() / cos).min(SHADOW_MAX_SLOPE);
+        let p = p + n * (texel * SHADOW_NORMAL_OFFSET_TEXELS);
+        let Some((uv, z)) = project(&v.view_proj, p) else { return 1.0 };
+        if !(0.0..=1.0).contains(&uv.x) || !(0.0..=1.0).contains(&uv.y) || z > 1.0 {
+            return 1.0;
+        }
+        let bias = texel * (SHADOW_BIAS_TEXELS + SHADOW_SLOPE_BIAS_TEXELS * tan);
+        let z_ref = v.depth_of(v.linear_depth(z) - bias);
+        let r = pcf_radius as i32;
+        if r == 0 {
+            return self.compare_bilinear(uv, z_ref);
+        }
+        let step = 1.0 / v.size as f32;
+        let mut sum = 0.0;
+        for j in -r..=r {
+            for i in -r..=r {
+                sum += self.compare_bilinear(uv + Vec2::new(i as f32, j as f32) * step, z_ref);
+            }
+        }
+        sum / ((2 * r + 1) * (2 * r + 1)) as f32
+    }
+}
+
+/// A light's rendered maps.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightShadowMaps {
+    pub light: usize,
+    pub kind: ShadowKind,
+    pub maps: Vec<ShadowMap>,
+}
+
+impl LightShadowMaps {
+    /// The map a point uses: the cascade of its camera view distance `view_distance`, the spot
+    /// map, or the cube face of its direction from the light at `light_position`.
+    #[inline]
+    pub fn map_for(&self, p: Vec3, view_distance: f32, light_position: Vec3) -> Option<&ShadowMap> {
+        match self.kind {
+            ShadowKind::Directional => self.maps.iter().find(|m| view_distance <= m.view.split_far).or(self.maps.last()),
+            ShadowKind::Spot => self.maps.first(),
+            ShadowKind::Point => self.maps.get(cube_face(p - light_position)),
+        }
+    }
+}
+
+/// Where a probe sits and how it is sampled.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProbePlan {
+    /// The object it serves (left out of its own faces).
+    pub object: u32,
+    /// The object's bounds centre: where the six faces are rendered from.
+    pub centre: Vec3,
+    /// Box-projected parallax correction against this box (the scene's bounds) where the object
+    /// is room-sized; `None`: directions are looked up as if the scene were infinitely far.
+    pub parallax_box: Option<Aabb>,
+    pub near: f32,
+    pub far: f32,
+}
+
+/// An object counts as room-sized (a floor, a wall, a pool) when it spans at least this share
+/// of the scene's extent along two axes.
+pub const ROOM_SIZED_SHARE: f32 = 0.5;
+
+/// One probe per object that reflects or refracts (and has geometry).
+pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
+    let scene = prepared.scene;
+    let extent = bounds.max - bounds.min;
+    scene
+        .objects
+        .iter()
+        .enumerate()
+        .filter(|(i, o)| !prepared.object_bounds[*i].is_empty() && (o.is_reflective(&scene.materials) || o.is_refractive(&scene.materials)))
+        .map(|(i, _)| {
+            let ob = prepared.object_bounds[i];
+            let e = ob.max - ob.min;
+            let spans = (0..3).filter(|&a| extent[a] > 0.0 && e[a] >= ROOM_SIZED_SHARE * extent[a]).count();
+            let centre = ob.center();
+            let (near, far) = perspective_range(centre, bounds);
+            ProbePlan { object: i as u32, centre, parallax_box: (spans >= 2).then_some(*bounds), near, far }
+        })
+        .collect()
+}
+
+/// A rendered probe: six faces of `size`², face after face in [`CUBE_FACES`] order, row-major,
+/// linear RGB of the lit scene (the skybox where nothing was drawn).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Probe {
+    pub plan: ProbePlan,
+    pub size: u32,
+    pub texels: Vec<Vec3>,
+    face_vp: [Mat4; 6],
+}
+
+impl Probe {
+    /// An unrendered probe (black faces) of `size`; the backend fills [`Probe::texels`] face by
+    /// face from [`Probe::face_camera`].
+    pub fn new(plan: ProbePlan, size: u32) -> Self {
+        let face_vp = std::array::from_fn(|f| cube_face_camera(plan.centre, f, plan.near, plan.far).view_projection(1.0));
+        Self { plan, size, texels: vec![Vec3::ZERO; 6 * size as usize * size as usize], face_vp }
+    }
+
+    pub fn face_camera(&self, face: usize) -> Camera {
+        cube_face_camera(self.plan.centre, face, self.plan.near, self.plan.far)
+    }
+
+    /// The direction to look up for a ray from `p` along unit `dir`: `dir` itself, or with the
+    /// parallax box, from the probe's centre to where the ray leaves the box.
+    #[inline]
+    pub fn lookup_direction(&self, p: Vec3, dir: Vec3) -> Vec3 {
+        match self.plan.parallax_box {
+            Some(b) => {
+                let inv = dir.recip();
+                let t1 = (b.min - p) * inv;
+                let t2 = (b.max - p) * inv;
+                let t_exit = t1.max(t2).min_element();
+                if t_exit.is_finite() && t_exit > 0.0 { p + dir * t_exit - self.plan.centre } else { dir }
+            }
+            None => dir,
+        }
+    }
+
+    /// The probe's colour for a ray from `p` along unit `dir` (bilinear within the face).
+    pub fn sample(&self, p: Vec3, dir: Vec3) -> Vec3 {
+        let d = self.lookup_direction(p, dir);
+        if d == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        let face = cube_face(d);
+        let Some((uv, _)) = project(&self.face_vp[face], self.plan.centre + d) else { return Vec3::ZERO };
+        let n = self.size as i32;
+        let t = uv * n as f32 - Vec2::splat(0.5);
+        let (x0, y0) = (t.x.floor(), t.y.floor());
+        let (fx, fy) = (t.x - x0, t.y - y0);
+        let base = face * (n * n) as usize;
+        let at = |x: i32, y: i32| self.texels[base + (y.clamp(0, n - 1) * n + x.clamp(0, n - 1)) as usize];
+        let (x0, y0) = (x0 as i32, y0 as i32);
+        let a = at(x0, y0).lerp(at(x0 + 1, y0), fx);
+        let b = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
+        a.lerp(b, fy)
+    }
+}
+
+/// Which path an effect of an object took this frame (the report's per-object `effects`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EffectPath {
+    /// Ray traced (the heuristic selected the object).
+    Traced,
+    /// Shadow maps (shadows) or the object's probe (reflection, refraction).
+    Raster,
+    /// None: the object has no such effect, or `--fallback none` left it out.
+    None,
+}
+
+/// Per visible object: which path each of its effects took.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObjectEffects {
+    pub id: usize,
+    pub name: String,
+    pub shadow: EffectPath,
+    pub reflection: EffectPath,
+    pub refraction: EffectPath,
+}
+
+/// The report's `effects`: one entry per object with covered pixels, from the per-object count
+/// of traced (`traced[i]`) and untraced (`untraced[i]`) pixels.
+pub fn object_effects(scene: &Scene, traced: &[u64], untraced: &[u64], fallback: Fallback) -> Vec<ObjectEffects> {
+    let any_shadow_light = lights(&scene.lights).any(|l| l.casts_shadows());
+    scene
+        .objects
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| traced.get(*i).copied().unwrap_or(0) + untraced.get(*i).copied().unwrap_or(0) > 0)
+        .map(|(i, o)| {
+            let path = |has: bool| {
+                if !has {
+                    EffectPath::None
+                } else if traced[i] > 0 && untraced[i] == 0 {
+                    EffectPath::Traced
+                } else if fallback == Fallback::Raster {
+                    if traced[i] > 0 { EffectPath::Traced } else { EffectPath::Raster }
+                } else if traced[i] > 0 {
+                    EffectPath::Traced
+                } else {
+                    EffectPath::None
+                }
+            };
+            ObjectEffects {
+                id: i,
+                name: o.name.clone(),
+                shadow: path(any_shadow_light),
+                reflection: path(o.is_reflective(&scene.materials)),
+                refraction: path(o.is_refractive(&scene.materials)),
+            }
+        })
+        .collect()
+}
+
+/// Everything the per-pixel fallback reads: the lights, their maps, the probes.
+pub struct FallbackScene<'a> {
+    pub scene: &'a Scene,
+    pub frame_lights: &'a FrameLights,
+    /// Per light (in [`lights`] order): its maps, if it casts shadows.
+    pub shadow_maps: Vec<Option<&'a LightShadowMaps>>,
+    /// Per object: its probe, if it reflects or refracts.
+    pub probes: Vec<Option<&'a Probe>>,
+    pub camera: &'a Camera,
+    pub pcf_radius: u32,
+}
+
+impl FallbackScene<'_> {
+    /// The fallback terms of one covered pixel of object `object` with surface `s`:
+    /// `(shadow, reflection, refraction)`, the same quantities the trace stage writes, from the
+    /// shadow maps and the object's probe instead of rays.
+    pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
+        let scene = self.scene;
+        let incident = if self.camera.is_orthographic() {
+            self.camera.forward()
+        } else {
+            (s.position - self.camera.position).normalize_or(self.camera.forward())
+        };
+        let view = -incident;
+        let view_distance = (s.position - self.camera.position).dot(self.camera.forward());
+
+        let mut shadow = Vec3::ONE;
+        let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
+        if !unlit {
+            for (k, light) in lights(&scene.lights).enumerate() {
+                let Some(Some(maps)) = self.shadow_maps.get(k) else { continue };
+                let (dir, _dist, radiance) = self.frame_lights.incident_and_distance(k, s.position);
+                let n = facing(s.normal, view);
+                if radiance == Vec3::ZERO || n.dot(dir) <= 0.0 {
+                    continue;
+                }
+                let light_position = match light {
+                    Light::Point(l) => l.position,
+                    Light::Spot(l) => l.position,
+                    Light::Directional(_) => Vec3::ZERO,
+                };
+                let Some(map) = maps.map_for(s.position, view_distance, light_position) else { continue };
+                let vis = map.visibility(s.position, n, dir, self.pcf_radius);
+                if vis < 1.0 {
+                    shadow -= self.frame_lights.blinn_phong_incident((dir, radiance), s, view) * (1.0 - vis);
+                }
+            }
+        }
+
+        let probe = self.probes.get(object as usize).copied().flatten();
+        let look = |dir: Vec3| match probe {
+            Some(p) => p.sample(s.position, dir),
+            None => sky(&scene.environment, &scene.textures, dir),
+        };
+        let reflection = if s.reflectivity > 0.0 { look(reflect(incident, s.normal).normalize_or_zero()) } else { Vec3::ZERO };
+        let refraction = if s.opacity < 1.0 {
+            let (dir, _tir) = refract_or_reflect(incident, s.normal, scene.environment.ior, s.ior);
+            look(dir)
+        } else {
+            Vec3::ZERO
+        };
+        (shadow, reflection, refraction)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fallback_names_round_trip() {
+        for n in Fallback::NAMES {
+            assert_eq!(Fallback::parse(n).unwrap().as_str(), n);
+        }
+        assert_eq!(Fallback::parse("rays"), None);
+        assert_eq!(Fallback::default(), Fallback::Raster);
+    }
+
+    #[test]
+    fn linear_depth_inverts_depth_of() {
+        for ortho in [true, false] {
+            let v = ShadowView {
+                view_proj: Mat4::IDENTITY,
+                size: 64,
+                orthographic: ortho,
+                near: 0.1,
+                far: 50.0,
+                texel_world: 0.1,
+                split_far: 1.0,
+            };
+            for d in [0.1f32, 0.5, 3.0, 20.0, 49.0] {
+                let z = v.depth_of(d);
+                assert!((0.0..=1.0001).contains(&z), "{z}");
+                assert!((v.linear_depth(z) - d).abs() < 1e-3 * d.max(1.0), "{ortho} {d} {}", v.linear_depth(z));
+            }
+        }
+    }
+
+    #[test]
+    fn practical_splits_by_hand() {
+        // near 1, far 100, 2 cascades: t = 0.5: log 10, uniform 50.5 → 30.25; t = 1: 100.
+        let s = cascade_splits(1.0, 100.0, 2);
+        assert!((s[0] - 30.25).abs() < 1e-4 && (s[1] - 100.0).abs() < 1e-3, "{s:?}");
+    }
+
+    #[test]
+    fn cube_faces_see_their_own_axis() {
+        for (f, (dir, _)) in CUBE_FACES.iter().enumerate() {
+            let cam = cube_face_camera(Vec3::ZERO, f, 0.1, 10.0);
+            let (uv, z) = project(&cam.view_projection(1.0), *dir).unwrap();
+            assert!((uv - Vec2::splat(0.5)).length() < 1e-5 && z > 0.0 && z < 1.0, "face {f}: {uv} {z}");
+            assert_eq!(cube_face(*dir), f);
+            // A direction near a face's edge projects inside that face.
+            let edge = *dir + (CUBE_FACES[(f + 2) % 6].0) * 0.99;
+            let (uv, _) = project(&cam.view_projection(1.0), edge).unwrap();
+            assert!(uv.min_element() >= 0.0 && uv.max_element() <= 1.0, "{uv}");
+        }
+    }
+
+    #[test]
+    fn bilinear_comparison_by_hand() {
+        // 2×2 map: left column depth 0.8 (an occluder near the light), right column 0.2.
+        let view =
+            ShadowView { view_proj: Mat4::IDENTITY, size: 2, orthographic: true, near: 0.0, far: 1.0, texel_world: 0.5, split_far: 1.0 };
+        let map = ShadowMap { view, depth: vec![0.8, 0.2, 0.8, 0.2] };
+        // A receiver at depth 0.5: lit by the right texels only. Half-way between the texel
+        // centres (u = 0.5) the weights are ½ each.
+        assert!((map.compare_bilinear(Vec2::new(0.5, 0.5), 0.5) - 0.5).abs() < 1e-6);
+        // A quarter of the way (u = 0.375, 0.25 of a texel past the left centre): 0.25 lit.
+        assert!((map.compare_bilinear(Vec2::new(0.375, 0.5), 0.5) - 0.25).abs() < 1e-6);
+        // Beyond the right centre, clamped: fully lit.
+        assert_eq!(map.compare_bilinear(Vec2::new(0.9, 0.5), 0.5), 1.0);
+    }
+
+    #[test]
+    fn box_projection_looks_from_the_centre_to_the_exit_point() {
+        let b = Aabb { min: Vec3::splat(-10.0), max: Vec3::splat(10.0) };
+        let plan = ProbePlan { object: 0, centre: Vec3::ZERO, parallax_box: Some(b), near: 0.1, far: 40.0 };
+        let probe = Probe::new(plan, 4);
+        // From (5, 0, 0) straight up: leaves the box at (5, 10, 0).
+        let d = probe.lookup_direction(Vec3::new(5.0, 0.0, 0.0), Vec3::Y);
+        assert!((d - Vec3::new(5.0, 10.0, 0.0)).length() < 1e-5, "{d}");
+        let far = Probe::new(ProbePlan { parallax_box: None, ..plan }, 4);
+        assert_eq!(far.lookup_direction(Vec3::new(5.0, 0.0, 0.0), Vec3::Y), Vec3::Y);
+    }
+
+    #[test]
+    fn probe_faces_sample_what_was_written() {
+        let plan = ProbePlan { object: 0, centre: Vec3::new(1.0, 2.0, 3.0), parallax_box: None, near: 0.1, far: 40.0 };
+        let mut probe = Probe::new(plan, 8);
+        for f in 0..6 {
+            for t in &mut probe.texels[f * 64..(f + 1) * 64] {
+                *t = Vec3::splat(f as f32);
+            }
+        }
+        for (f, (dir, _)) in CUBE_FACES.iter().enumerate() {
+            assert_eq!(probe.sample(Vec3::ZERO, *dir), Vec3::splat(f as f32));
+        }
+    }
+}
