@@ -165,6 +165,27 @@ pub struct LightViews {
     pub views: Vec<ShadowView>,
 }
 
+/// A mesh casts into the shadow maps when its material lets through less than this share of
+/// the light (glass does not: the ray-traced shadow of a 10%-opaque sphere is 10% dark, a map can
+/// only say all or nothing).
+pub const CASTER_MAX_TRANSMITTANCE: f32 = 0.5;
+
+/// Per mesh of `prepared`: whether it casts into the shadow maps (its material's shadow
+/// transmittance is below [`CASTER_MAX_TRANSMITTANCE`]; textured opacity counts as opaque).
+pub fn caster_meshes(prepared: &PreparedScene) -> Vec<bool> {
+    let scene = prepared.scene;
+    prepared
+        .meshes
+        .iter()
+        .map(|m| {
+            scene
+                .materials
+                .get(m.material)
+                .is_some_and(|mat| crate::prepare::material_shadow(mat, &scene.textures) < CASTER_MAX_TRANSMITTANCE)
+        })
+        .collect()
+}
+
 /// The polygons' world bounds (every object with geometry) and, when given, the point clouds'.
 pub fn scene_bounds(prepared: &PreparedScene, with_point_clouds: bool) -> Aabb {
     let mut b = prepared.object_bounds.iter().filter(|b| !b.is_empty()).fold(Aabb::EMPTY, |a, b| a.union(b));
@@ -594,6 +615,18 @@ pub fn object_effects(scene: &Scene, traced: &[u64], untraced: &[u64], fallback:
             }
         })
         .collect()
+}
+
+/// [`object_effects`] counted from a frame's object ids and mask.
+pub fn object_effects_of(scene: &Scene, object_id: &[u32], mask: &[f32], fallback: Fallback) -> Vec<ObjectEffects> {
+    let n = scene.objects.len();
+    let (mut traced, mut untraced) = (vec![0u64; n], vec![0u64; n]);
+    for (&id, &m) in object_id.iter().zip(mask) {
+        if crate::is_polygon(id) && (id as usize) < n {
+            if m >= crate::blend::MASK_EPSILON { traced[id as usize] += 1 } else { untraced[id as usize] += 1 }
+        }
+    }
+    object_effects(scene, &traced, &untraced, fallback)
 }
 
 /// Everything the per-pixel fallback reads: the lights, their maps, the probes.

@@ -14,7 +14,7 @@ use hybrid_core::fallback::{
     FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowMap, ShadowView, plan_light_views, plan_probes, project,
     scene_bounds,
 };
-use hybrid_core::prepare::{PreparedScene, material_shadow};
+use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
 use hybrid_core::shading::{FrameLights, lights};
 use hybrid_core::{GBuffer, RtLayer, is_polygon};
@@ -23,11 +23,6 @@ use rayon::prelude::*;
 
 use crate::capsule::{CapsuleRequest, PointCloudCapsule, RtCapsule};
 use crate::{depth_merge, lighting, raster};
-
-/// A mesh casts into the shadow maps when its material lets through less than this share of
-/// the light (glass does not: the ray-traced shadow of a 10%-opaque sphere is 10% dark, a map can
-/// only say all or nothing).
-pub const CASTER_MAX_TRANSMITTANCE: f32 = 0.5;
 
 /// The fallbacks' cache: each light's maps (kept while their view stays the same), each
 /// object's probe (kept: scenes are static), and what was rendered so far.

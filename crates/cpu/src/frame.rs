@@ -17,8 +17,7 @@ use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule};
 use crate::fallback::FallbackCache;
 use crate::{blend, depth_merge, lighting, raster, trace};
-use hybrid_core::blend::MASK_EPSILON;
-use hybrid_core::fallback::{Fallback, ObjectEffects, object_effects};
+use hybrid_core::fallback::{Fallback, object_effects_of};
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
 
@@ -169,7 +168,7 @@ impl<'s> CpuRenderer<'s> {
         timed(&mut t[Stage::Blend], || {
             blend::blend_into(&gbuffer, &b.lighting, [&b.shadow, &b.reflection, &b.refraction], fallback, &mut b.final_srgb)
         });
-        let effects = effects_report(self.scene, &gbuffer, self.fallback_applies(mode));
+        let effects = object_effects_of(self.scene, &gbuffer.object_id, &gbuffer.mask, self.fallback_applies(mode));
 
         self.heuristic.record_trace(mode, heuristic_report.as_ref(), t[Stage::Trace]);
         t.frame = ms_since(frame_start);
@@ -313,18 +312,6 @@ impl<'s> CpuRenderer<'s> {
         let spheres = self.capsule.as_ref().filter(|_| self.spheres_in_trace);
         trace::trace_with_spheres_into(&self.prepared, &self.bvh, spheres, gbuffer, camera, out)
     }
-}
-
-/// The report's per-object effect paths, from the G-buffer's ids and mask.
-fn effects_report(scene: &Scene, gbuffer: &GBuffer, fallback: Fallback) -> Vec<ObjectEffects> {
-    let n = scene.objects.len();
-    let (mut traced, mut untraced) = (vec![0u64; n], vec![0u64; n]);
-    for (&id, &m) in gbuffer.object_id.iter().zip(&gbuffer.mask) {
-        if hybrid_core::is_polygon(id) && (id as usize) < n {
-            if m >= MASK_EPSILON { traced[id as usize] += 1 } else { untraced[id as usize] += 1 }
-        }
-    }
-    object_effects(scene, &traced, &untraced, fallback)
 }
 
 fn timed<T>(slot: &mut f64, f: impl FnOnce() -> T) -> T {
