@@ -46,17 +46,7 @@ impl FallbackCache {
     pub fn new(prepared: &PreparedScene, spheres_cast: bool) -> Self {
         let scene = prepared.scene;
         let bounds = scene_bounds(prepared, spheres_cast);
-        let casters = prepared
-            .meshes
-            .iter()
-            .map(|m| {
-                scene.materials.get(m.material).is_some_and(|mat| {
-                    let t = material_shadow(mat, &scene.textures);
-                    // Evaluated (textured) opacity counts as opaque here.
-                    t < CASTER_MAX_TRANSMITTANCE
-                })
-            })
-            .collect();
+        let casters = caster_meshes(prepared);
         let mut plans = vec![None; scene.objects.len()];
         for p in plan_probes(prepared, &scene_bounds(prepared, false)) {
             plans[p.object as usize] = Some(p);
