@@ -11,8 +11,8 @@ use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
 use hybrid_core::depth_merge::unpack_into;
 use hybrid_core::fallback::{
-    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowMap, ShadowView, plan_light_views, plan_probes, project,
-    scene_bounds,
+    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowMap, ShadowView, caster_meshes, plan_light_views,
+    plan_probes, project, scene_bounds,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
