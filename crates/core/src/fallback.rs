@@ -479,8 +479,11 @@ pub struct ProbePlan {
 }
 
 /// An object counts as room-sized (a floor, a wall, a pool) when it spans at least this share
-/// of the scene's extent along two axes.
+/// of the scene's extent along two axes and is thin (at most [`ROOM_SIZED_THICKNESS`] of the
+/// scene's extent) along the third: a flat surface of the room, which the room's box encloses
+/// (a ball that is the whole scene is not).
 pub const ROOM_SIZED_SHARE: f32 = 0.5;
+pub const ROOM_SIZED_THICKNESS: f32 = 0.1;
 
 /// One probe per object that reflects or refracts (and has geometry).
 pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
@@ -495,9 +498,10 @@ pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
             let ob = prepared.object_bounds[i];
             let e = ob.max - ob.min;
             let spans = (0..3).filter(|&a| extent[a] > 0.0 && e[a] >= ROOM_SIZED_SHARE * extent[a]).count();
+            let thin = (0..3).any(|a| e[a] <= ROOM_SIZED_THICKNESS * extent[a]);
             let centre = ob.center();
             let (near, far) = perspective_range(centre, bounds);
-            ProbePlan { object: i as u32, centre, parallax_box: (spans >= 2).then_some(*bounds), near, far }
+            ProbePlan { object: i as u32, centre, parallax_box: (spans >= 2 && thin).then_some(*bounds), near, far }
         })
         .collect()
 }
