@@ -506,13 +506,22 @@ pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
         .collect()
 }
 
+/// Steps of a probe's depth-based parallax correction ([`Probe::lookup_direction`]): a march
+/// along the ray at quadratically spaced distances up to the probe's far plane, then a
+/// bisection between the last step in front of the seen surface and the first behind it. More
+/// steps find thinner surfaces and land closer, at the cost of a distance lookup each.
+pub const PROBE_MARCH_STEPS: u32 = 32;
+pub const PROBE_REFINE_STEPS: u32 = 5;
+
 /// A rendered probe: six faces of `size`², face after face in [`CUBE_FACES`] order, row-major,
-/// linear RGB of the lit scene (the skybox where nothing was drawn).
+/// linear RGB of the lit scene (the skybox where nothing was drawn), and per texel the distance
+/// from the centre to the surface seen (`plan.far` where nothing was drawn).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Probe {
     pub plan: ProbePlan,
     pub size: u32,
     pub texels: Vec<Vec3>,
+    pub distance: Vec<f32>,
     face_vp: [Mat4; 6],
 }
 
@@ -521,15 +530,35 @@ impl Probe {
     /// face from [`Probe::face_camera`].
     pub fn new(plan: ProbePlan, size: u32) -> Self {
         let face_vp = std::array::from_fn(|f| cube_face_camera(plan.centre, f, plan.near, plan.far).view_projection(1.0));
-        Self { plan, size, texels: vec![Vec3::ZERO; 6 * size as usize * size as usize], face_vp }
+        let n = 6 * size as usize * size as usize;
+        Self { plan, size, texels: vec![Vec3::ZERO; n], distance: vec![plan.far; n], face_vp }
+    }
+
+    /// The face and UV a direction from the centre falls on.
+    #[inline]
+    fn face_uv(&self, d: Vec3) -> Option<(usize, Vec2)> {
+        let face = cube_face(d);
+        project(&self.face_vp[face], self.plan.centre + d).map(|(uv, _)| (face, uv))
+    }
+
+    /// The distance the probe saw along `d` (nearest texel; `plan.far` for nothing).
+    #[inline]
+    pub fn distance_along(&self, d: Vec3) -> f32 {
+        let Some((face, uv)) = self.face_uv(d) else { return self.plan.far };
+        let n = self.size as i32;
+        let (x, y) = (((uv.x * n as f32) as i32).clamp(0, n - 1), ((uv.y * n as f32) as i32).clamp(0, n - 1));
+        self.distance[face * (n * n) as usize + (y * n + x) as usize]
     }
 
     pub fn face_camera(&self, face: usize) -> Camera {
         cube_face_camera(self.plan.centre, face, self.plan.near, self.plan.far)
     }
 
-    /// The direction to look up for a ray from `p` along unit `dir`: `dir` itself, or with the
-    /// parallax box, from the probe's centre to where the ray leaves the box.
+    /// The direction to look up for a ray from `p` along unit `dir`, from the probe's centre to
+    /// where the ray meets the scene: with the parallax box, where the ray leaves the box; else
+    /// where it first goes behind the surface the probe saw (|y| > D(y), y = p + t·dir − centre,
+    /// D the distance the probe saw along y), marched in [`PROBE_MARCH_STEPS`] and refined in
+    /// [`PROBE_REFINE_STEPS`]; `dir` itself when it never does (it leaves towards the sky).
     #[inline]
     pub fn lookup_direction(&self, p: Vec3, dir: Vec3) -> Vec3 {
         match self.plan.parallax_box {
@@ -540,7 +569,32 @@ impl Probe {
                 let t_exit = t1.max(t2).min_element();
                 if t_exit.is_finite() && t_exit > 0.0 { p + dir * t_exit - self.plan.centre } else { dir }
             }
-            None => dir,
+            None => {
+                let c = self.plan.centre;
+                let far = self.plan.far;
+                // Behind the seen surface (where the probe saw one: not the sky).
+                let behind = |t: f32| {
+                    let y = p + dir * t - c;
+                    let (len, seen) = (y.length(), self.distance_along(y));
+                    len > 0.0 && seen < far * 0.999 && len > seen
+                };
+                let mut front = 0.0f32;
+                for k in 1..=PROBE_MARCH_STEPS {
+                    let s = k as f32 / PROBE_MARCH_STEPS as f32;
+                    let t = far * s * s;
+                    if behind(t) {
+                        let mut back = t;
+                        for _ in 0..PROBE_REFINE_STEPS {
+                            let mid = 0.5 * (front + back);
+                            if behind(mid) { back = mid } else { front = mid }
+                        }
+                        let y = p + dir * back - c;
+                        return if y.length_squared() > 0.0 { y } else { dir };
+                    }
+                    front = t;
+                }
+                dir
+            }
         }
     }
 
@@ -550,8 +604,7 @@ impl Probe {
         if d == Vec3::ZERO {
             return Vec3::ZERO;
         }
-        let face = cube_face(d);
-        let Some((uv, _)) = project(&self.face_vp[face], self.plan.centre + d) else { return Vec3::ZERO };
+        let Some((face, uv)) = self.face_uv(d) else { return Vec3::ZERO };
         let n = self.size as i32;
         let t = uv * n as f32 - Vec2::splat(0.5);
         let (x0, y0) = (t.x.floor(), t.y.floor());
@@ -777,6 +830,32 @@ mod tests {
         assert!((d - Vec3::new(5.0, 10.0, 0.0)).length() < 1e-5, "{d}");
         let far = Probe::new(ProbePlan { parallax_box: None, ..plan }, 4);
         assert_eq!(far.lookup_direction(Vec3::new(5.0, 0.0, 0.0), Vec3::Y), Vec3::Y);
+    }
+
+    #[test]
+    fn depth_parallax_finds_the_wall_the_ray_meets() {
+        // A probe at the origin inside a cube room of half-size 4 (distances: the exact distance
+        // to the wall along each texel's direction). A ray from (2, 0, 0) along +Z meets the
+        // wall z = 4 at (2, 0, 4): the lookup must point there, not along +Z.
+        let plan = ProbePlan { object: 0, centre: Vec3::ZERO, parallax_box: None, near: 0.01, far: 100.0 };
+        let mut probe = Probe::new(plan, 64);
+        for f in 0..6 {
+            let cam = probe.face_camera(f);
+            let inv = cam.view_projection(1.0).inverse();
+            for y in 0..64 {
+                for x in 0..64 {
+                    let ndc = Vec3::new((x as f32 + 0.5) / 32.0 - 1.0, 1.0 - (y as f32 + 0.5) / 32.0, 0.5);
+                    let d = (inv.project_point3(ndc)).normalize();
+                    probe.distance[f * 4096 + y * 64 + x] = 4.0 / d.abs().max_element();
+                }
+            }
+        }
+        let d = probe.lookup_direction(Vec3::new(2.0, 0.0, 0.0), Vec3::Z);
+        let want = Vec3::new(2.0, 0.0, 4.0);
+        assert!(d.normalize().angle_between(want.normalize()) < 0.03, "{d} vs {want}");
+        // Nothing seen (sky): the direction itself.
+        let sky = Probe::new(plan, 4);
+        assert_eq!(sky.lookup_direction(Vec3::new(2.0, 0.0, 0.0), Vec3::Z), Vec3::Z);
     }
 
     #[test]

@@ -190,6 +190,9 @@ fn render_probe(prepared: &PreparedScene, mut capsule: Option<&mut PointCloudCap
         }
         let lit = lighting::deferred_lighting(&g, prepared.scene, &camera);
         probe.texels[face * texels..(face + 1) * texels].copy_from_slice(&lit);
+        for (d, (pos, &id)) in probe.distance[face * texels..(face + 1) * texels].iter_mut().zip(g.position.iter().zip(&g.object_id)) {
+            *d = if id == hybrid_core::NO_OBJECT { plan.far } else { pos.distance(plan.centre).min(plan.far) };
+        }
     }
     probe
 }
