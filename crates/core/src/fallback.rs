@@ -412,22 +412,28 @@ impl ShadowMap {
     /// Points outside the map are lit.
     pub fn visibility(&self, p: Vec3, n: Vec3, to_light: Vec3, pcf_radius: u32) -> f32 {
         let v = &self.view;
-        // The texel's world size at the receiver.
-        let texel = if v.orthographic {
-            v.texel_world
-        } else {
-            let c = v.view_proj * p.extend(1.0);
-            v.texel_world * c.w.max(v.near)
-        };
+        let m = &v.view_proj;
+        // One projection: the receiver's clip position, then its normal offset added through
+        // the matrix's linear part (the offset is a direction).
+        let c = *m * p.extend(1.0);
+        // The texel's world size at the receiver (perspective: clip w is the view distance).
+        let texel = if v.orthographic { v.texel_world } else { v.texel_world * c.w.max(v.near) };
         let cos = n.dot(to_light).clamp(1e-3, 1.0);
         let tan = ((1.0 - cos * cos).max(0.0).sqrt() / cos).min(SHADOW_MAX_SLOPE);
-        let p = p + n * (texel * SHADOW_NORMAL_OFFSET_TEXELS);
-        let Some((uv, z)) = project(&v.view_proj, p) else { return 1.0 };
+        let o = n * (texel * SHADOW_NORMAL_OFFSET_TEXELS);
+        let c = c + m.x_axis * o.x + m.y_axis * o.y + m.z_axis * o.z;
+        if c.w <= 0.0 {
+            return 1.0;
+        }
+        let inv_w = 1.0 / c.w;
+        let (uv, z) = (Vec2::new(c.x * inv_w * 0.5 + 0.5, 0.5 - c.y * inv_w * 0.5), c.z * inv_w);
         if !(0.0..=1.0).contains(&uv.x) || !(0.0..=1.0).contains(&uv.y) || z > 1.0 {
             return 1.0;
         }
         let bias = texel * (SHADOW_BIAS_TEXELS + SHADOW_SLOPE_BIAS_TEXELS * tan);
-        let z_ref = v.depth_of(v.linear_depth(z) - bias);
+        // depth_of(linear_depth(z) − bias), without the round trip: orthographic depth is affine
+        // in distance, a perspective view's distance is clip w.
+        let z_ref = if v.orthographic { z + bias / (v.far - v.near) } else { v.depth_of(c.w - bias) };
         let r = pcf_radius as i32;
         if r == 0 {
             return self.compare_bilinear(uv, z_ref);
@@ -510,7 +516,7 @@ pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
 /// along the ray at quadratically spaced distances up to the probe's far plane, then a
 /// bisection between the last step in front of the seen surface and the first behind it. More
 /// steps find thinner surfaces and land closer, at the cost of a distance lookup each.
-pub const PROBE_MARCH_STEPS: u32 = 32;
+pub const PROBE_MARCH_STEPS: u32 = 16;
 pub const PROBE_REFINE_STEPS: u32 = 5;
 
 /// A rendered probe: six faces of `size`², face after face in [`CUBE_FACES`] order, row-major,
@@ -522,23 +528,28 @@ pub struct Probe {
     pub size: u32,
     pub texels: Vec<Vec3>,
     pub distance: Vec<f32>,
-    face_vp: [Mat4; 6],
 }
 
 impl Probe {
     /// An unrendered probe (black faces) of `size`; the backend fills [`Probe::texels`] face by
     /// face from [`Probe::face_camera`].
     pub fn new(plan: ProbePlan, size: u32) -> Self {
-        let face_vp = std::array::from_fn(|f| cube_face_camera(plan.centre, f, plan.near, plan.far).view_projection(1.0));
         let n = 6 * size as usize * size as usize;
-        Self { plan, size, texels: vec![Vec3::ZERO; n], distance: vec![plan.far; n], face_vp }
+        Self { plan, size, texels: vec![Vec3::ZERO; n], distance: vec![plan.far; n] }
     }
 
-    /// The face and UV a direction from the centre falls on.
+    /// The face and UV a direction from the centre falls on: the face camera's projection
+    /// (90°, looking along the face's axis with its up vector), in closed form.
     #[inline]
     fn face_uv(&self, d: Vec3) -> Option<(usize, Vec2)> {
         let face = cube_face(d);
-        project(&self.face_vp[face], self.plan.centre + d).map(|(uv, _)| (face, uv))
+        let (forward, up) = CUBE_FACES[face];
+        let right = forward.cross(up);
+        let z = d.dot(forward);
+        if z <= 0.0 {
+            return None;
+        }
+        Some((face, Vec2::new(0.5 + 0.5 * d.dot(right) / z, 0.5 - 0.5 * d.dot(up) / z)))
     }
 
     /// The distance the probe saw along `d` (nearest texel; `plan.far` for nothing).
@@ -856,6 +867,28 @@ mod tests {
         // Nothing seen (sky): the direction itself.
         let sky = Probe::new(plan, 4);
         assert_eq!(sky.lookup_direction(Vec3::new(2.0, 0.0, 0.0), Vec3::Z), Vec3::Z);
+    }
+
+    #[test]
+    fn closed_form_face_uv_is_the_face_cameras_projection() {
+        let plan = ProbePlan { object: 0, centre: Vec3::new(1.0, -2.0, 0.5), parallax_box: None, near: 0.1, far: 40.0 };
+        let probe = Probe::new(plan, 8);
+        let mut rng = 0x1234_5678u32;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 17;
+            rng ^= rng << 5;
+            rng as f32 / u32::MAX as f32 * 2.0 - 1.0
+        };
+        for _ in 0..1000 {
+            let d = Vec3::new(next(), next(), next());
+            if d.length() < 1e-3 {
+                continue;
+            }
+            let (face, uv) = probe.face_uv(d).unwrap();
+            let (want, _) = project(&probe.face_camera(face).view_projection(1.0), plan.centre + d).unwrap();
+            assert!((uv - want).abs().max_element() < 1e-4, "{d}: {uv} vs {want}");
+        }
     }
 
     #[test]
