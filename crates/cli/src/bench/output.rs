@@ -42,7 +42,7 @@ pub(super) fn policy_name(p: Policy) -> &'static str {
     }
 }
 
-pub const FRAMES_CSV_HEADER: &str = "set,mode,frame,time_s,frame_ms,capsule_ms,raster_ms,heuristic_ms,trace_ms,blend_ms,spent,budget,budget_ms,all_cost,visible,selected,churn,flip";
+pub const FRAMES_CSV_HEADER: &str = "set,mode,frame,time_s,frame_ms,capsule_ms,raster_ms,heuristic_ms,trace_ms,blend_ms,spent,budget,budget_ms,all_cost,visible,selected,churn,flip,fallback_ms";
 
 pub(super) fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map_or(String::new(), |v| v.to_string())
@@ -55,7 +55,7 @@ pub(super) fn frames_csv<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> 
         let t = &r.timings;
         let _ = writeln!(
             s,
-            "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{:.3}",
             r.set,
             r.mode,
             r.frame,
@@ -73,7 +73,8 @@ pub(super) fn frames_csv<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> 
             opt(r.visible),
             opt(r.selected),
             opt(r.churn),
-            opt(r.flip.map(|f| format!("{f:.5}")))
+            opt(r.flip.map(|f| format!("{f:.5}"))),
+            t.fallback
         );
     }
     s
@@ -209,6 +210,7 @@ pub(super) fn markdown(
         let _ = writeln!(s, "| RAST | {} |", cell(Some(&h.raster)));
         let _ = writeln!(s, "| HEUR | {} |", cell(Some(&h.heuristic)));
         let _ = writeln!(s, "| RAYT | {} |", cell(Some(&h.trace)));
+        let _ = writeln!(s, "| FALLBACK (shadow maps, probes) | {} |", cell(Some(&h.fallback)));
         let _ = writeln!(s, "| BLEND | {} |", cell(Some(&h.blend)));
     }
     for (mode, label) in [("all", "NO HEURISTIC FRAME (all)"), ("rt-only", "RAYT ONLY FRAME"), ("raster", "RASTER ONLY FRAME")] {

@@ -73,6 +73,8 @@ pub(super) struct StageStats {
     pub(super) raster: Stat,
     pub(super) heuristic: Stat,
     pub(super) trace: Stat,
+    /// Stage 3b, the raster fallbacks (issue 18): maps and probes rendered, lookups.
+    pub(super) fallback: Stat,
     pub(super) blend: Stat,
     pub(super) frame: Stat,
 }
@@ -84,6 +86,7 @@ pub(super) fn stage_stats(records: &[&FrameRecord]) -> StageStats {
         raster: s(|t| t.raster),
         heuristic: s(|t| t.heuristic),
         trace: s(|t| t.trace),
+        fallback: s(|t| t.fallback),
         blend: s(|t| t.blend),
         frame: s(|t| t.frame),
     }
