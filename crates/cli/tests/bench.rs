@@ -112,7 +112,21 @@ fn tiny_bench_of_the_demo_writes_every_output() {
 
     // frames.csv: static frames of every mode, path frames of hybrid and all, rt-only on FLIP frames.
     let (header, rows) = csv(&out.join("frames.csv"));
-    for c in ["set", "mode", "frame", "time_s", "frame_ms", "raster_ms", "heuristic_ms", "trace_ms", "blend_ms", "spent", "churn", "flip", "fallback_ms"] {
+    for c in [
+        "set",
+        "mode",
+        "frame",
+        "time_s",
+        "frame_ms",
+        "raster_ms",
+        "heuristic_ms",
+        "trace_ms",
+        "blend_ms",
+        "spent",
+        "churn",
+        "flip",
+        "fallback_ms",
+    ] {
         col(&header, c);
     }
     let (set, mode, frame_ms, flip) = (col(&header, "set"), col(&header, "mode"), col(&header, "frame_ms"), col(&header, "flip"));

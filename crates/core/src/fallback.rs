@@ -697,6 +697,112 @@ pub fn object_effects_of(scene: &Scene, object_id: &[u32], mask: &[f32], fallbac
     object_effects(scene, &traced, &untraced, fallback)
 }
 
+/// A refractive object counts as planar (a pane of glass, a pool's water) when its smallest
+/// extent is at most this share of its largest.
+pub const PLANAR_THICKNESS: f32 = 0.05;
+
+/// Per object: whether its refraction looks through the see-through layer ([`SeeThrough`])
+/// instead of its probe: a refractive object that is planar ([`PLANAR_THICKNESS`]). A probe
+/// sees such an object's background (a pool's floor, what lies behind a window) from one point
+/// and at grazing angles, blurred; the see-through layer sees it from the camera, sharp.
+pub fn see_through_objects(prepared: &PreparedScene) -> Vec<bool> {
+    let scene = prepared.scene;
+    scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(i, o)| {
+            let b = prepared.object_bounds[i];
+            if b.is_empty() || !o.is_refractive(&scene.materials) {
+                return false;
+            }
+            let e = b.max - b.min;
+            e.min_element() <= PLANAR_THICKNESS * e.max_element()
+        })
+        .collect()
+}
+
+/// Steps of the see-through layer's ray intersection ([`SeeThrough::refraction`]).
+pub const SEE_THROUGH_STEPS: u32 = 3;
+
+/// The see-through layer's view is the frame's widened by this factor on each axis (at the same
+/// pixel density), so that a refraction that bends towards the screen's edge (a pool's floor
+/// seen at the bottom of the view) still lands inside it. Larger values cover stronger bends
+/// at the cost of rendering factor² times the frame's pixels.
+pub const SEE_THROUGH_GUARD: f32 = 1.5;
+
+/// The see-through layer's camera and size for a frame of `width × height` seen by `camera`:
+/// the same eye and orientation, the view widened by [`SEE_THROUGH_GUARD`].
+pub fn see_through_view(camera: &Camera, width: u32, height: u32) -> (Camera, u32, u32) {
+    let projection = match camera.projection {
+        Projection::Perspective { fov_y_deg, near, far } => {
+            let t = (fov_y_deg.to_radians() * 0.5).tan() * SEE_THROUGH_GUARD;
+            Projection::Perspective { fov_y_deg: (2.0 * t.atan()).to_degrees().min(179.0), near, far }
+        }
+        Projection::Orthographic { height: h, near, far } => Projection::Orthographic { height: h * SEE_THROUGH_GUARD, near, far },
+    };
+    let size = |n: u32| ((n as f32 * SEE_THROUGH_GUARD).round() as u32).max(1);
+    (Camera { projection, ..*camera }, size(width), size(height))
+}
+
+/// The see-through layer: the frame's view, widened ([`see_through_view`]), rendered with the
+/// raster path without the planar refractive objects ([`see_through_objects`]), lit. A planar object's refraction ray from `p`
+/// along `t` is intersected with the layer's surfaces (each step: with the tangent plane of the
+/// surface where the current guess lands on screen) and looks up the layer's colour there.
+pub struct SeeThrough<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub view_proj: Mat4,
+    pub position: &'a [Vec3],
+    pub normal: &'a [Vec3],
+    pub object_id: &'a [u32],
+    pub color: &'a [Vec3],
+}
+
+impl SeeThrough<'_> {
+    /// The screen pixel a world point lands on, if on screen.
+    #[inline]
+    fn pixel_of(&self, x: Vec3) -> Option<usize> {
+        let (uv, _) = project(&self.view_proj, x)?;
+        ((0.0..1.0).contains(&uv.x) && (0.0..1.0).contains(&uv.y))
+            .then(|| (uv.y * self.height as f32) as usize * self.width as usize + (uv.x * self.width as f32) as usize)
+    }
+
+    /// The refraction along unit `t` from `p`, or `None` where nothing lies behind `p` (the
+    /// probe answers then). The distance starts as the surface's behind `p` and is refined
+    /// [`SEE_THROUGH_STEPS`] times against the tangent plane of the surface where the point
+    /// lands; a point that leaves the layer keeps the last pixel in it.
+    pub fn refraction(&self, p: Vec3, t: Vec3) -> Option<Vec3> {
+        let i = self.pixel_of(p)?;
+        if self.object_id[i] == crate::NO_OBJECT {
+            return None;
+        }
+        let mut d = self.position[i].distance(p);
+        let mut j = i;
+        for _ in 0..SEE_THROUGH_STEPS {
+            let Some(k) = self.pixel_of(p + t * d) else { break };
+            j = k;
+            if self.object_id[k] == crate::NO_OBJECT {
+                break;
+            }
+            let (q, n) = (self.position[k], self.normal[k]);
+            let denom = t.dot(n);
+            if denom.abs() < 1e-4 {
+                break;
+            }
+            let next = (q - p).dot(n) / denom;
+            if !(next > 0.0 && next.is_finite()) {
+                break;
+            }
+            d = next;
+        }
+        if let Some(k) = self.pixel_of(p + t * d) {
+            j = k;
+        }
+        self.color.get(j).copied()
+    }
+}
+
 /// Everything the per-pixel fallback reads: the lights, their maps, the probes.
 pub struct FallbackScene<'a> {
     pub scene: &'a Scene,
@@ -707,12 +813,17 @@ pub struct FallbackScene<'a> {
     pub probes: Vec<Option<&'a Probe>>,
     pub camera: &'a Camera,
     pub pcf_radius: u32,
+    /// Per object: whether its refraction uses `see_through` ([`see_through_objects`]).
+    pub see_through_objects: &'a [bool],
+    /// The see-through layer, when a planar refractive object needed it this frame.
+    pub see_through: Option<SeeThrough<'a>>,
 }
 
 impl FallbackScene<'_> {
-    /// The fallback terms of one covered pixel of object `object` with surface `s`:
+    /// The fallback terms of a pixel covered by object `object` with surface `s`:
     /// `(shadow, reflection, refraction)`, the same quantities the trace stage writes, from the
-    /// shadow maps and the object's probe instead of rays.
+    /// shadow maps, the object's probe and (planar refractive objects) the see-through layer
+    /// instead of rays.
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
         let scene = self.scene;
         let incident = if self.camera.is_orthographic() {
@@ -754,7 +865,11 @@ impl FallbackScene<'_> {
         let reflection = if s.reflectivity > 0.0 { look(reflect(incident, s.normal).normalize_or_zero()) } else { Vec3::ZERO };
         let refraction = if s.opacity < 1.0 {
             let (dir, _tir) = refract_or_reflect(incident, s.normal, scene.environment.ior, s.ior);
-            look(dir)
+            let through = match &self.see_through {
+                Some(st) if self.see_through_objects.get(object as usize).copied().unwrap_or(false) => st.refraction(s.position, dir),
+                _ => None,
+            };
+            through.unwrap_or_else(|| look(dir))
         } else {
             Vec3::ZERO
         };
@@ -889,6 +1004,47 @@ mod tests {
             let (want, _) = project(&probe.face_camera(face).view_projection(1.0), plan.centre + d).unwrap();
             assert!((uv - want).abs().max_element() < 1e-4, "{d}: {uv} vs {want}");
         }
+    }
+
+    #[test]
+    fn see_through_follows_the_refracted_ray_to_the_floor() {
+        // An orthographic camera looking straight down at a floor y = 0 over x, z ∈ [−2, 2]:
+        // 8 × 8 pixels of 0.5 units, each layer pixel's colour its column. A ray from (0.1, 1, 0)
+        // along (1, −1, 0)/√2 meets the floor at (1.1, 0, 0): column 6 (x ∈ [1, 1.5)).
+        let camera = Camera {
+            position: Vec3::new(0.0, 5.0, 0.0),
+            target: Vec3::ZERO,
+            up: Vec3::NEG_Z,
+            projection: Projection::Orthographic { height: 4.0, near: 0.1, far: 10.0 },
+        };
+        let n = 8usize;
+        let (mut position, mut color) = (Vec::new(), Vec::new());
+        for y in 0..n {
+            for x in 0..n {
+                position.push(Vec3::new(-2.0 + 0.5 * (x as f32 + 0.5), 0.0, -2.0 + 0.5 * (y as f32 + 0.5)));
+                color.push(Vec3::splat(x as f32));
+            }
+        }
+        let normal = vec![Vec3::Y; n * n];
+        let ids = vec![0u32; n * n];
+        let st = SeeThrough {
+            width: 8,
+            height: 8,
+            view_proj: camera.view_projection(1.0),
+            position: &position,
+            normal: &normal,
+            object_id: &ids,
+            color: &color,
+        };
+        let c = st.refraction(Vec3::new(0.1, 1.0, 0.0), Vec3::new(1.0, -1.0, 0.0).normalize()).unwrap();
+        assert_eq!(c, Vec3::splat(6.0));
+        // Nothing behind: no answer (the probe's turn).
+        let none = vec![crate::NO_OBJECT; n * n];
+        let empty = SeeThrough { object_id: &none, ..st };
+        assert_eq!(empty.refraction(Vec3::new(0.1, 1.0, 0.0), Vec3::NEG_Y), None);
+        // The widened view keeps the eye and orientation and grows by the guard factor.
+        let (wide, w, h) = see_through_view(&camera, 64, 32);
+        assert_eq!((wide.position, w, h), (camera.position, 96, 48));
     }
 
     #[test]

@@ -11,8 +11,8 @@ use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
 use hybrid_core::depth_merge::unpack_into;
 use hybrid_core::fallback::{
-    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowMap, ShadowView, caster_meshes, plan_light_views,
-    plan_probes, project, scene_bounds,
+    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, SeeThrough, ShadowMap, ShadowView, caster_meshes, plan_light_views,
+    plan_probes, project, scene_bounds, see_through_objects, see_through_view,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
@@ -35,6 +35,10 @@ pub struct FallbackCache {
     plans: Vec<Option<ProbePlan>>,
     /// Meshes that cast into the maps.
     casters: Vec<bool>,
+    /// Per object: planar refractive objects, whose refraction looks through the see-through
+    /// layer; per mesh: the meshes that layer draws (all the others).
+    see_through_objects: Vec<bool>,
+    see_through_meshes: Vec<bool>,
     bounds: Aabb,
     /// Shadow maps rendered per light (cascades, spot maps, cube faces), since the cache was made.
     pub shadow_map_renders: Vec<u64>,
@@ -47,6 +51,8 @@ impl FallbackCache {
         let scene = prepared.scene;
         let bounds = scene_bounds(prepared, spheres_cast);
         let casters = caster_meshes(prepared);
+        let see_through_objects = see_through_objects(prepared);
+        let see_through_meshes = prepared.meshes.iter().map(|m| !see_through_objects[m.object as usize]).collect();
         let mut plans = vec![None; scene.objects.len()];
         for p in plan_probes(prepared, &scene_bounds(prepared, false)) {
             plans[p.object as usize] = Some(p);
@@ -58,6 +64,8 @@ impl FallbackCache {
             probes: vec![None; scene.objects.len()],
             plans,
             casters,
+            see_through_objects,
+            see_through_meshes,
             bounds,
             shadow_map_renders: vec![0; n_lights],
             probe_renders: 0,
@@ -140,6 +148,16 @@ impl FallbackCache {
             renders.probes += 1;
         }
 
+        // The see-through layer, when a planar refractive object has untraced pixels: the view
+        // rasterized without those objects, lit.
+        let see_through_needed = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
+        let layer = see_through_needed.then(|| {
+            let (view, w, h) = see_through_view(camera, gbuffer.width, gbuffer.height);
+            let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
+            let lit = lighting::deferred_lighting(&g, scene, &view);
+            (g, lit, view)
+        });
+
         // The lookups.
         let frame_lights = FrameLights::new(&scene.lights, &scene.environment);
         let fb = FallbackScene {
@@ -149,6 +167,16 @@ impl FallbackCache {
             probes: self.probes.iter().map(Option::as_ref).collect(),
             camera,
             pcf_radius: self.settings.pcf_radius,
+            see_through_objects: &self.see_through_objects,
+            see_through: layer.as_ref().map(|(g, lit, view)| SeeThrough {
+                width: g.width,
+                height: g.height,
+                view_proj: view.view_projection(g.width as f32 / g.height.max(1) as f32),
+                position: &g.position,
+                normal: &g.normal,
+                object_id: &g.object_id,
+                color: lit,
+            }),
         };
         const CHUNK: usize = 256;
         shadow.par_chunks_mut(CHUNK).zip(reflection.par_chunks_mut(CHUNK)).zip(refraction.par_chunks_mut(CHUNK)).enumerate().for_each(

@@ -715,7 +715,7 @@ fn raster_meshes_into(
     let w = width as usize;
     let band_len = w * BAND_ROWS as usize;
     let rows = g.bands_mut(band_len);
-    let ctx = BandContext { prepared, chunks, rt_layer, rays: &rays, width, height, clear };
+    let ctx = BandContext { prepared, chunks, rt_layer, rays: &rays, width, height, clear, level0: include.is_some() };
     rows.into_par_iter()
         .enumerate()
         .with_max_len(1)
@@ -748,6 +748,7 @@ struct BandContext<'a, 's> {
     width: u32,
     height: u32,
     clear: bool,
+    level0: bool,
 }
 
 impl BandContext<'_, '_> {
@@ -811,7 +812,7 @@ impl BandContext<'_, '_> {
                         let st = &self.chunks[(id >> CHUNK_SHIFT) as usize].shade[(id & ((1 << CHUNK_SHIFT) - 1)) as usize];
                         let ts = self.prepared.triangle_surface(st.triangle);
                         let object = self.prepared.meshes[st.triangle.mesh as usize].object;
-                        let px = Pixels { out: &mut *out, row_base: rb, depth, object, clear: self.clear };
+                        let px = Pixels { out: &mut *out, row_base: rb, depth, object, clear: self.clear, level0: self.level0 };
                         shade_run(st, &ts, x as u32, end as u32, y, px);
                         x = end;
                     }
@@ -859,6 +860,8 @@ struct Pixels<'a, 'b> {
     depth: &'a [f32],
     object: u32,
     clear: bool,
+    /// Sample textures at level 0 (footprint 0) instead of by screen footprint.
+    level0: bool,
 }
 
 impl Pixels<'_, '_> {
@@ -889,6 +892,13 @@ fn shade_run(st: &ShadeTri, ts: &TriangleSurface<'_>, x0: u32, x1: u32, y: u32, 
     let py = y as f32 + 0.5;
     // The centres of pixels x..x + 4, as `shade` computes one.
     let centres = |x: u32| Vec4::new(x as f32 + 0.5, (x + 1) as f32 + 0.5, (x + 2) as f32 + 0.5, (x + 3) as f32 + 0.5);
+    if px_out.level0 && ts.is_textured() {
+        // Textures at level 0, as a secondary ray's hit samples them (the fallbacks' layers).
+        for x in x0..x1 {
+            px_out.emit(x, &ts.at(clamp_bary(st.bary(x as f32 + 0.5, py)), 0.0));
+        }
+        return;
+    }
     match ts.uvs() {
         // Pixel centres x + 0.5 are exact in f32 below 2²², so the planes one pixel right of
         // pixel x (`px + 1`) are those of pixel x + 1 bit for bit: computed once, used twice.
@@ -1257,7 +1267,8 @@ mod tests {
                     }
                     let depth = vec![0.5f32; (w * h) as usize];
                     let mut rows = b.bands_mut((w * h) as usize);
-                    let px = Pixels { out: &mut rows[0], row_base: (y * w) as usize, depth: &depth, object: 7, clear: false };
+                    let px =
+                        Pixels { out: &mut rows[0], row_base: (y * w) as usize, depth: &depth, object: 7, clear: false, level0: false };
                     shade_run(&st, &ts, x0, x1, y, px);
                 }
                 assert_eq!(gbuffer_bits(&a), gbuffer_bits(&b), "triangle {t:?}, planes {planes:?}");
