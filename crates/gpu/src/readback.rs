@@ -129,6 +129,11 @@ pub fn read_frame_buffers(ctx: &GpuContext, t: &FrameTargets) -> Result<FrameBuf
     })
 }
 
+/// The three fallback targets (shadow, reflection, refraction) of stage 3b.
+pub fn read_fallback(ctx: &GpuContext, t: &[Target; 3]) -> Result<[Vec<Vec3>; 3], GpuError> {
+    Ok([rgb(read_rgba_f32(ctx, &t[0])?), rgb(read_rgba_f32(ctx, &t[1])?), rgb(read_rgba_f32(ctx, &t[2])?)])
+}
+
 /// The capsule's packed RGBA16UI frame.
 pub fn read_packed(ctx: &GpuContext, t: &FrameTargets) -> Result<PackedRtFrame, GpuError> {
     let mut packed = PackedRtFrame::new(t.width, t.height);
