@@ -13,8 +13,10 @@
 //! targets (Rgba16Float, shadow 1 and the others 0 where no fallback applies) and how many maps
 //! and probes were rendered.
 //!
-//! Not mirrored (yet): the point-cloud spheres neither cast into the maps nor appear in the
-//! probes here (the CPU splats them into both).
+//! The point-cloud spheres cast into the maps (with `spheres_in_trace`) as the CPU's discs: a
+//! second, instanced draw per map of one square per sphere at the depth of its point nearest the
+//! light, its fragments outside the disc discarded. Not mirrored (yet): the spheres do not appear
+//! in the probes here (the CPU merges the capsule's frame into each face).
 
 use std::ops::Range;
 
@@ -33,9 +35,12 @@ use crate::lighting::LightingPass;
 use crate::raster::RasterPass;
 use crate::scene::SceneGpu;
 use crate::shaders;
+use crate::spheres::SpheresGpu;
 use crate::targets::{COLOR_FORMAT, DEPTH_FORMAT, FrameTargets, Target};
 use crate::timing::StageTimer;
 
+/// The view struct and depth conventions both passes share (prepended to each, after common).
+pub const SHADOW_VIEW_WGSL: &str = include_str!("shaders/shadow_view.wgsl");
 /// WGSL of the shadow-map pass (common/*.wgsl is prepended).
 pub const SHADOW_DEPTH_WGSL: &str = include_str!("shaders/shadow_depth.wgsl");
 /// WGSL of the lookup pass (common/*.wgsl is prepended).
@@ -163,6 +168,10 @@ pub struct FallbackGpu {
     settings: FallbackSettings,
     bounds: Aabb,
     casters: wgpu::Buffer,
+    /// The point clouds' spheres (`SpheresGpu::spheres`) and how many.
+    spheres: wgpu::Buffer,
+    sphere_count: u32,
+    disc_pipeline: wgpu::RenderPipeline,
     depth_pipeline: wgpu::RenderPipeline,
     depth_layout: wgpu::BindGroupLayout,
     lookup_pipeline: wgpu::ComputePipeline,
@@ -171,7 +180,7 @@ pub struct FallbackGpu {
     slots: Vec<Option<LightSlot>>,
     maps: DepthArray,
     cube: DepthArray,
-    /// One `uniform_stride`-byte slot per view: its view_proj (the depth pass's dynamic offset).
+    /// One `uniform_stride`-byte slot per view: its `GpuShadowView` (the depth pass's dynamic offset).
     view_uniforms: wgpu::Buffer,
     uniform_stride: u64,
     views: wgpu::Buffer,
@@ -195,7 +204,13 @@ pub struct FallbackGpu {
 }
 
 impl FallbackGpu {
-    pub fn new(ctx: &GpuContext, scene: &SceneGpu, prepared: &PreparedScene, spheres_cast: bool) -> Result<Self, GpuError> {
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &SceneGpu,
+        prepared: &PreparedScene,
+        spheres: &SpheresGpu,
+        spheres_cast: bool,
+    ) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let settings = FallbackSettings::default();
         let s = prepared.scene;
@@ -241,7 +256,7 @@ impl FallbackGpu {
         }
         let maps = DepthArray::new(device, "fallback.shadow_maps", settings.shadow_map_size, maps_layers);
         let cube = DepthArray::new(device, "fallback.shadow_cube", settings.cube_shadow_size, cube_layers);
-        let uniform_stride = u64::from(device.limits().min_uniform_buffer_offset_alignment).max(64);
+        let uniform_stride = u64::from(device.limits().min_uniform_buffer_offset_alignment).max(VIEW_BYTES).next_multiple_of(16);
         let view_uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("fallback.view_uniforms"),
             size: uniform_stride * u64::from(views.max(1)),
@@ -329,13 +344,16 @@ impl FallbackGpu {
             usage: wgpu::BufferUsages::UNIFORM,
         });
 
-        let (depth_pipeline, depth_layout) = depth_pipeline(device, scene);
+        let (depth_pipeline, disc_pipeline, depth_layout) = depth_pipelines(device, scene);
         let (lookup_pipeline, lookup_layout) = lookup_pipeline(device, scene);
         Ok(Self {
             device: device.clone(),
             settings,
             bounds,
             casters,
+            spheres: spheres.spheres.clone(),
+            sphere_count: spheres.count,
+            disc_pipeline,
             depth_pipeline,
             depth_layout,
             lookup_pipeline,
@@ -383,17 +401,7 @@ impl FallbackGpu {
             for (k, view) in lv.views.iter().enumerate() {
                 let index = slot.first_view + k as u32;
                 let (array, layer) = slot.places[k];
-                if slot.rendered[k] != Some(*view) {
-                    slot.rendered[k] = Some(*view);
-                    to_render.push(index);
-                    self.shadow_map_renders[lv.light] += 1;
-                    ctx.queue.write_buffer(
-                        &self.view_uniforms,
-                        u64::from(index) * self.uniform_stride,
-                        bytemuck::cast_slice(&view.view_proj.to_cols_array()),
-                    );
-                }
-                data.push(GpuShadowView {
+                let gpu_view = GpuShadowView {
                     view_proj: view.view_proj.to_cols_array_2d(),
                     near: view.near,
                     far: view.far,
@@ -403,7 +411,14 @@ impl FallbackGpu {
                     orthographic: u32::from(view.orthographic),
                     array_index: array,
                     layer,
-                });
+                };
+                if slot.rendered[k] != Some(*view) {
+                    slot.rendered[k] = Some(*view);
+                    to_render.push(index);
+                    self.shadow_map_renders[lv.light] += 1;
+                    ctx.queue.write_buffer(&self.view_uniforms, u64::from(index) * self.uniform_stride, bytemuck::bytes_of(&gpu_view));
+                }
+                data.push(gpu_view);
             }
             ctx.queue.write_buffer(
                 &self.views,
@@ -498,15 +513,17 @@ impl FallbackGpu {
         self.outputs = Some([t("fallback.shadow"), t("fallback.reflection"), t("fallback.refraction")]);
     }
 
-    /// Records the maps of `to_render` (from [`Self::update_views`]) and the lookup pass into the
-    /// fallback targets ([`Self::ensure_outputs`] first). The first map pass and the lookup pass
-    /// are timed as `Stage::Fallback` (its span covers the passes between).
+    /// Records the maps of `to_render` (from [`Self::update_views`]; with the spheres' discs when
+    /// `splat_spheres`) and the lookup pass into the fallback targets ([`Self::ensure_outputs`]
+    /// first). The first map pass and the lookup pass are timed as `Stage::Fallback` (its span
+    /// covers the passes between).
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         scene: &SceneGpu,
         targets: &FrameTargets,
         to_render: &[u32],
+        splat_spheres: bool,
         timer: &mut StageTimer,
     ) {
         let views_of = |index: u32| {
@@ -525,10 +542,11 @@ impl FallbackGpu {
                         resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                             buffer: &self.view_uniforms,
                             offset: 0,
-                            size: wgpu::BufferSize::new(64),
+                            size: wgpu::BufferSize::new(VIEW_BYTES),
                         }),
                     },
                     wgpu::BindGroupEntry { binding: 1, resource: self.casters.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: self.spheres.as_entire_binding() },
                 ],
             });
             for (k, &index) in to_render.iter().enumerate() {
@@ -551,6 +569,12 @@ impl FallbackGpu {
                     pass.set_bind_group(0, &scene.bind_group, &[]);
                     pass.set_bind_group(1, &bind_group, &[(u64::from(index) * self.uniform_stride) as u32]);
                     pass.draw(0..3 * scene.triangle_count, 0..1);
+                }
+                if splat_spheres && self.sphere_count > 0 {
+                    pass.set_pipeline(&self.disc_pipeline);
+                    pass.set_bind_group(0, &scene.bind_group, &[]);
+                    pass.set_bind_group(1, &bind_group, &[(u64::from(index) * self.uniform_stride) as u32]);
+                    pass.draw(0..6, 0..self.sphere_count);
                 }
             }
         }
@@ -593,9 +617,22 @@ impl FallbackGpu {
     }
 }
 
-/// The depth-only pipeline of the shadow maps and its group 1 (view_proj by dynamic offset,
-/// caster flags).
-fn depth_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::RenderPipeline, wgpu::BindGroupLayout) {
+/// Bytes of one view in the depth pass's uniform slots.
+const VIEW_BYTES: u64 = std::mem::size_of::<GpuShadowView>() as u64;
+
+/// The depth-only pipelines of the shadow maps (caster triangles; the spheres' discs) and their
+/// group 1 (the view by dynamic offset, caster flags, spheres).
+fn depth_pipelines(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::RenderPipeline, wgpu::RenderPipeline, wgpu::BindGroupLayout) {
+    let storage = |binding: u32| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("fallback.depth"),
         entries: &[
@@ -605,20 +642,12 @@ fn depth_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::RenderPipel
                 ty: wgpu::BindingType::Buffer {
                     ty: wgpu::BufferBindingType::Uniform,
                     has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(64),
+                    min_binding_size: wgpu::BufferSize::new(VIEW_BYTES),
                 },
                 count: None,
             },
-            wgpu::BindGroupLayoutEntry {
-                binding: 1,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
+            storage(1),
+            storage(2),
         ],
     });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -626,30 +655,32 @@ fn depth_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::RenderPipel
         bind_group_layouts: &[Some(&scene.layout), Some(&layout)],
         immediate_size: 0,
     });
-    let module = shaders::module(device, "fallback.depth", SHADOW_DEPTH_WGSL);
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("fallback.depth"),
-        layout: Some(&pipeline_layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_shadow"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        primitive: wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleList, cull_mode: None, ..Default::default() },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: None,
-        multiview_mask: None,
-        cache: None,
-    });
-    (pipeline, layout)
+    let module = shaders::module(device, "fallback.depth", &format!("{SHADOW_VIEW_WGSL}\n{SHADOW_DEPTH_WGSL}"));
+    let pipeline = |label: &str, vertex: &str, fragment: Option<&str>| {
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState { module: &module, entry_point: Some(vertex), compilation_options: Default::default(), buffers: &[] },
+            primitive: wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleList, cull_mode: None, ..Default::default() },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: fragment.map(|entry| wgpu::FragmentState {
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                targets: &[],
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    };
+    (pipeline("fallback.depth", "vs_shadow", None), pipeline("fallback.discs", "vs_disc", Some("fs_disc")), layout)
 }
 
 /// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–16).
@@ -695,7 +726,7 @@ fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePip
         bind_group_layouts: &[Some(&scene.layout), Some(&layout)],
         immediate_size: 0,
     });
-    let module = shaders::module(device, "fallback.lookup", FALLBACK_WGSL);
+    let module = shaders::module(device, "fallback.lookup", &format!("{SHADOW_VIEW_WGSL}\n{FALLBACK_WGSL}"));
     let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("fallback.lookup"),
         layout: Some(&pipeline_layout),
@@ -714,7 +745,7 @@ mod tests {
     #[test]
     fn fallback_wgsl_is_valid() {
         for (name, source) in [("shadow_depth.wgsl", SHADOW_DEPTH_WGSL), ("fallback.wgsl", FALLBACK_WGSL)] {
-            if let Err(e) = shaders::validate(&shaders::with_common(source)) {
+            if let Err(e) = shaders::validate(&shaders::with_common(&format!("{SHADOW_VIEW_WGSL}\n{source}"))) {
                 panic!("{name}: {e}");
             }
         }

@@ -432,7 +432,7 @@ impl<'s> GpuRenderer<'s> {
         }
         if self.fallback_gpu.is_none() {
             let spheres_cast = self.spheres_in_trace && self.capsule.is_some();
-            self.fallback_gpu = Some(FallbackGpu::new(&self.ctx, &self.gpu_scene, &self.prepared, spheres_cast)?);
+            self.fallback_gpu = Some(FallbackGpu::new(&self.ctx, &self.gpu_scene, &self.prepared, &self.spheres, spheres_cast)?);
         }
         let Some(fb) = self.fallback_gpu.as_mut() else { return Ok((renders, 0.0)) };
         fb.ensure_outputs(targets.width, targets.height);
@@ -451,7 +451,9 @@ impl<'s> GpuRenderer<'s> {
             to_render = fb.update_views(&self.ctx, self.scene, camera, aspect);
             renders.shadow_maps = to_render.len() as u64;
         }
-        fb.encode(enc, &self.gpu_scene, targets, &to_render, &mut self.timer);
+        // As the CPU: the spheres cast into the maps when they take part in the trace stage.
+        let splat = self.spheres_in_trace && self.capsule.is_some();
+        fb.encode(enc, &self.gpu_scene, targets, &to_render, splat, &mut self.timer);
         self.fallback_written = true;
         Ok((renders, probe_ms))
     }

@@ -69,8 +69,8 @@ fn uploaded_structs_match_their_wgsl_layouts() {
 
 #[test]
 fn fallback_structs_match_their_wgsl_layouts() {
-    use crate::fallback::{FALLBACK_WGSL, GpuFallbackParams, GpuProbe, GpuShadowLight, GpuShadowView};
-    let source = with_common(FALLBACK_WGSL);
+    use crate::fallback::{FALLBACK_WGSL, GpuFallbackParams, GpuProbe, GpuShadowLight, GpuShadowView, SHADOW_DEPTH_WGSL, SHADOW_VIEW_WGSL};
+    let source = with_common(&format!("{SHADOW_VIEW_WGSL}\n{FALLBACK_WGSL}"));
     let module = naga::front::wgsl::parse_str(&source).expect("the fallback pass's WGSL parses");
     check(
         &module,
@@ -79,6 +79,16 @@ fn fallback_structs_match_their_wgsl_layouts() {
             layout!(GpuShadowLight, "ShadowLightGpu", [kind, first_view, view_count, _pad]),
             layout!(GpuProbe, "ProbeGpu", [centre, box_min, box_max, info, face_vp]),
             layout!(GpuFallbackParams, "FallbackParams", [pcf_radius, probe_size, _pad0, _pad1]),
+        ],
+    );
+    // The shadow-map pass reads the views and the spheres with its own copy of `Sphere`.
+    let source = with_common(&format!("{SHADOW_VIEW_WGSL}\n{SHADOW_DEPTH_WGSL}"));
+    let module = naga::front::wgsl::parse_str(&source).expect("the shadow-map pass's WGSL parses");
+    check(
+        &module,
+        [
+            layout!(GpuShadowView, "ShadowViewGpu", [view_proj, near, far, texel_world, split_far, size, orthographic, array_index, layer]),
+            layout!(GpuSphere, "Sphere", [center, radius, albedo, cloud]),
         ],
     );
 }

@@ -149,6 +149,7 @@ fn probe() {
             ("spheres_rq.wgsl", crate::spheres::SPHERES_RQ_WGSL),
             ("shadow_depth.wgsl", crate::fallback::SHADOW_DEPTH_WGSL),
             ("fallback.wgsl", crate::fallback::FALLBACK_WGSL),
+            ("shadow_view.wgsl", crate::fallback::SHADOW_VIEW_WGSL),
         ];
         let names: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("const ")).map(|l| l.split(':').next().unwrap()).collect();
         assert!(names.len() >= 18, "{header}");

@@ -173,3 +173,14 @@ fn shadow_maps_are_cached_along_a_camera_path() {
         }
     }
 }
+
+/// The tree scan's spheres cast into the maps (as the CPU's discs) onto the ground below.
+#[test]
+fn tree_merge_sphere_shadows_match_the_cpu() {
+    let ctx = context();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/tree-merge.toml");
+    let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let (c, g) = render_both(&ctx, &scene, Mode::Raster, 96, 54);
+    assert!(assert_fallbacks_match("tree-merge", Mode::Raster, &c, &g, 0.02) > 0);
+    assert!(differing(&g.buffers.shadow_fallback, Vec3::ONE) > 50, "no shadows in the GPU's shadow fallback");
+}

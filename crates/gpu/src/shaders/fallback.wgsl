@@ -1,23 +1,7 @@
 // fallback.wgsl — stage 3b's lookups (issue 18): the WGSL twin of
 // hybrid_core::fallback::FallbackScene::pixel for every covered polygon pixel the trace stage
 // left out (mask < MASK_EPSILON), from the shadow maps and the objects' probes; shadow 1,
-// reflection and refraction 0 elsewhere. common/*.wgsl is prepended.
-
-// One shadow map (hybrid_core::fallback::ShadowView) and where it lies.
-struct ShadowViewGpu {
-    view_proj: mat4x4<f32>,
-    near: f32,
-    far: f32,
-    // Orthographic: a texel's world size; perspective: at unit distance.
-    texel_world: f32,
-    // Cascades: the camera view distance up to which it is used (∞ otherwise).
-    split_far: f32,
-    size: u32,
-    orthographic: u32,
-    // SHADOW_ARRAY_MAPS or SHADOW_ARRAY_CUBE, and the layer in that array.
-    array_index: u32,
-    layer: u32,
-}
+// reflection and refraction 0 elsewhere. common/*.wgsl and shadow_view.wgsl are prepended.
 
 // Per light (GPU light order = hybrid_core::shading::lights order): its views.
 struct ShadowLightGpu {
@@ -60,41 +44,6 @@ struct FallbackParams {
 @group(1) @binding(14) var probe_faces: texture_2d_array<f32>;
 @group(1) @binding(15) var<storage, read> probes: array<ProbeGpu>;
 @group(1) @binding(16) var<uniform> params: FallbackParams;
-
-// hybrid_core::fallback::project: uv (row 0 at the top) and reversed-Z depth; w ≤ 0 (behind a
-// perspective view) gives valid = 0.
-struct Projected {
-    uv: vec2<f32>,
-    z: f32,
-    valid: bool,
-}
-
-fn project_point(view_proj: mat4x4<f32>, p: vec3<f32>) -> Projected {
-    let c = view_proj * vec4<f32>(p, 1.0);
-    if c.w <= 0.0 {
-        return Projected(vec2<f32>(0.0), 0.0, false);
-    }
-    let ndc = c.xyz / c.w;
-    return Projected(vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5), ndc.z, true);
-}
-
-fn linear_depth(v: ShadowViewGpu, z: f32) -> f32 {
-    let n = v.near;
-    let f = v.far;
-    if v.orthographic != 0u {
-        return f - z * (f - n);
-    }
-    return n * f / ((f - n) * z + n);
-}
-
-fn depth_of(v: ShadowViewGpu, d: f32) -> f32 {
-    let n = v.near;
-    let f = v.far;
-    if v.orthographic != 0u {
-        return (f - d) / (f - n);
-    }
-    return n * f / ((f - n) * max(d, 1e-6)) - n / (f - n);
-}
 
 // ShadowMap::lit: 1 where texel (x, y), clamped to the map, is no nearer than z_ref.
 fn lit(v: ShadowViewGpu, x: i32, y: i32, z_ref: f32) -> f32 {
