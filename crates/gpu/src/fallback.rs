@@ -15,8 +15,8 @@
 //!
 //! The point-cloud spheres cast into the maps (with `spheres_in_trace`) as the CPU's discs: a
 //! second, instanced draw per map of one square per sphere at the depth of its point nearest the
-//! light, its fragments outside the disc discarded. Not mirrored (yet): the spheres do not appear
-//! in the probes here (the CPU merges the capsule's frame into each face).
+//! light, its fragments outside the disc discarded. They appear in the probes too: each face
+//! traces the capsule first and rasterizes the polygons against its depth, as the main frame.
 
 use std::ops::Range;
 
@@ -30,6 +30,7 @@ use hybrid_core::shading::{Light, lights};
 use hybrid_scene::{Aabb, Camera, Scene};
 use wgpu::util::DeviceExt;
 
+use crate::capsule::GpuCapsule;
 use crate::context::{GpuContext, GpuError};
 use crate::lighting::LightingPass;
 use crate::raster::RasterPass;
@@ -192,6 +193,8 @@ pub struct FallbackGpu {
     probe_faces_view: wgpu::TextureView,
     probes: wgpu::Buffer,
     probe_targets: Option<FrameTargets>,
+    /// The capsule's hit ids of a probe face (not the frame's).
+    probe_hit_ids: Option<wgpu::Buffer>,
     params: wgpu::Buffer,
     /// Per mesh: its object and its triangles (the probes leave their object's out).
     mesh_triangles: Vec<(u32, Range<u32>)>,
@@ -372,6 +375,7 @@ impl FallbackGpu {
             probe_faces_view,
             probes,
             probe_targets: None,
+            probe_hit_ids: None,
             params,
             mesh_triangles,
             outputs: None,
@@ -441,7 +445,8 @@ impl FallbackGpu {
     }
 
     /// Renders the probe of every object in `needed` that has a plan and no probe yet: six faces
-    /// with the raster and deferred-lighting passes (the object's own meshes left out), each
+    /// with the raster and deferred-lighting passes (the object's own meshes left out; with
+    /// `capsule`, its spheres traced first and merged by depth, as the main frame's), each
     /// face its own submission (the frame uniforms hold the face's camera). The caller must
     /// write the frame's own uniforms again afterwards when this returns more than 0.
     #[allow(clippy::too_many_arguments)]
@@ -452,6 +457,7 @@ impl FallbackGpu {
         scene: &Scene,
         raster: &RasterPass,
         lighting: &LightingPass,
+        capsule: Option<(&GpuCapsule, &SpheresGpu)>,
         needed: &[bool],
     ) -> u64 {
         let size = self.settings.probe_size;
@@ -480,7 +486,19 @@ impl FallbackGpu {
                 let camera = probe.face_camera(face as usize);
                 scene_gpu.write_uniforms(ctx, &camera, size, size, &scene.environment);
                 let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fallback: probe face") });
-                raster.encode_triangles(&mut enc, scene_gpu, targets, &ranges, &mut timer);
+                if let Some((capsule, spheres)) = capsule {
+                    let ids = self.probe_hit_ids.get_or_insert_with(|| {
+                        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                            label: Some("fallback.probe_hit_ids"),
+                            size: u64::from(size) * u64::from(size) * 4,
+                            usage: wgpu::BufferUsages::STORAGE,
+                            mapped_at_creation: false,
+                        })
+                    });
+                    capsule.encode_with_ids(&mut enc, scene_gpu, spheres, targets, false, ids, &mut timer);
+                    capsule.encode_unpack(&mut enc, scene_gpu, targets, true, &mut timer);
+                }
+                raster.encode_triangles(&mut enc, scene_gpu, targets, capsule.is_none(), &ranges, &mut timer);
                 lighting.encode(&mut enc, scene_gpu, targets, &mut timer);
                 enc.copy_texture_to_texture(
                     targets.lighting.texture.as_image_copy(),

@@ -441,7 +441,9 @@ impl<'s> GpuRenderer<'s> {
         let mut probe_ms = 0.0;
         if needed.iter().any(|&x| x) {
             let start = Instant::now();
-            renders.probes = fb.render_probes(&self.ctx, &self.gpu_scene, self.scene, &self.raster, &self.lighting, &needed);
+            // As the CPU: the spheres appear in the probes when they take part in the trace stage.
+            let capsule = self.capsule.as_ref().filter(|_| self.spheres_in_trace).map(|c| (c, &self.spheres));
+            renders.probes = fb.render_probes(&self.ctx, &self.gpu_scene, self.scene, &self.raster, &self.lighting, capsule, &needed);
             if renders.probes > 0 {
                 // The probes' faces wrote their cameras into the frame uniforms.
                 self.gpu_scene.write_uniforms(&self.ctx, camera, targets.width, targets.height, &self.scene.environment);
