@@ -259,7 +259,8 @@ impl FallbackGpu {
         }
         let maps = DepthArray::new(device, "fallback.shadow_maps", settings.shadow_map_size, maps_layers);
         let cube = DepthArray::new(device, "fallback.shadow_cube", settings.cube_shadow_size, cube_layers);
-        let uniform_stride = u64::from(device.limits().min_uniform_buffer_offset_alignment).max(VIEW_BYTES).next_multiple_of(16);
+        // Dynamic offsets must be multiples of the device's alignment.
+        let uniform_stride = VIEW_BYTES.next_multiple_of(u64::from(device.limits().min_uniform_buffer_offset_alignment).max(16));
         let view_uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("fallback.view_uniforms"),
             size: uniform_stride * u64::from(views.max(1)),
