@@ -6,6 +6,7 @@ use std::path::Path;
 
 use glam::Vec3;
 use hybrid_core::buffer_view::{self, BufferKind, FrameView};
+use hybrid_core::fallback::LightShadowMaps;
 use hybrid_core::{NO_OBJECT, RT_SCENE_OBJECT};
 
 use crate::CliError;
@@ -16,6 +17,31 @@ pub type DumpInput<'a> = FrameView<'a>;
 
 fn xyz(v: &[Vec3]) -> [(&'static str, Vec<f32>); 3] {
     [("R", v.iter().map(|c| c.x).collect()), ("G", v.iter().map(|c| c.y).collect()), ("B", v.iter().map(|c| c.z).collect())]
+}
+
+/// Each light's shadow maps as `shadow_map_<light>.exr` (`<light>`: its index among the scene's
+/// lights, directional first, then point, then spot), channel `Z` the reversed-Z depth (0: no
+/// caster). A light with several maps (cascades nearest first, cube faces +X −X +Y −Y +Z −Z) has
+/// them side by side, left to right.
+pub fn write_shadow_maps(dir: &Path, maps: &[LightShadowMaps]) -> Result<(), CliError> {
+    for light in maps {
+        let h = light.maps.iter().map(|m| m.view.size).max().unwrap_or(0);
+        let w: u32 = light.maps.iter().map(|m| m.view.size).sum();
+        if w == 0 || h == 0 {
+            continue;
+        }
+        let mut z = vec![0.0f32; w as usize * h as usize];
+        let mut x0 = 0usize;
+        for m in &light.maps {
+            let n = m.view.size as usize;
+            for y in 0..n {
+                z[y * w as usize + x0..y * w as usize + x0 + n].copy_from_slice(&m.depth[y * n..(y + 1) * n]);
+            }
+            x0 += n;
+        }
+        write_exr(&dir.join(format!("shadow_map_{}.exr", light.light)), w, h, &[("Z", z)])?;
+    }
+    Ok(())
 }
 
 /// Writes all buffers into `dir` (which must exist and be writable).
@@ -42,6 +68,15 @@ pub fn write_all(dir: &Path, d: &DumpInput) -> Result<(), CliError> {
     let b = d.buffers;
     for (name, v) in [("lighting", &b.lighting), ("shadow", &b.shadow), ("reflection", &b.reflection), ("refraction", &b.refraction)] {
         exr3(name, v)?;
+    }
+    for (name, v) in [
+        ("shadow_fallback", &b.shadow_fallback),
+        ("reflection_fallback", &b.reflection_fallback),
+        ("refraction_fallback", &b.refraction_fallback),
+    ] {
+        if !v.is_empty() {
+            exr3(name, v)?;
+        }
     }
     // Object ids as 16-bit grey: id + 1, 0 = no object (the RT-scene shows as 65535).
     let ids: Vec<u16> = g

@@ -15,7 +15,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::CliError;
 use crate::args::{BackendChoice, CapsuleArgs, CapsuleVisibilityChoice, RenderArgs};
-use crate::dump::{DumpInput, write_all};
+use crate::dump::{DumpInput, write_all, write_shadow_maps};
 use crate::output::{OutputDir, check_output_file, write_bytes, write_png_rgba8};
 
 /// Renders longer than this show a progress bar (unless `--quiet`).
@@ -108,6 +108,7 @@ pub fn run(args: RenderArgs) -> Result<(), CliError> {
     write_png_rgba8(&args.output, width, height, &frame.buffers.final_srgb)?;
     if let Some(dir) = &args.dump {
         write_all(dir, &DumpInput { gbuffer: &frame.gbuffer, buffers: &frame.buffers, rt_packed: frame.rt_packed.as_ref() })?;
+        write_shadow_maps(dir, &renderer.shadow_maps()?)?;
     }
     if let Some(path) = &args.report {
         let json = serde_json::to_vec_pretty(&report_json(&frame.report)?).map_err(|e| CliError::failure(e.to_string()))?;
@@ -230,6 +231,14 @@ impl<'s> AnyRenderer<'s> {
                 AnyRenderer::Gpu(Box::new(r))
             }
         })
+    }
+
+    /// The shadow maps the raster fallbacks used in the last frame (for `--dump`).
+    pub fn shadow_maps(&self) -> Result<Vec<hybrid_core::fallback::LightShadowMaps>, CliError> {
+        match self {
+            AnyRenderer::Cpu(r) => Ok(r.fallback_cache().map(|c| c.shadow_maps().iter().flatten().cloned().collect()).unwrap_or_default()),
+            AnyRenderer::Gpu(_) => Ok(Vec::new()),
+        }
     }
 
     pub fn render(&mut self, camera: &Camera, settings: FrameSettings, on_stage: &mut dyn FnMut(Stage)) -> Result<Frame, CliError> {

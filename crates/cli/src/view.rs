@@ -35,6 +35,7 @@ pub fn run(args: ViewArgs) -> Result<(), CliError> {
         sphere_effects: !args.capsule.no_sphere_effects,
         primary_visibility: args.capsule.capsule_visibility.primary_visibility(),
         rt: args.capsule.rt.choice(),
+        fallback: args.capsule.fallback.fallback(),
     };
     hybrid_view::run(options).map_err(|e| CliError { code: e.code, message: e.message, detail: None })
 }

@@ -29,6 +29,10 @@ pub enum BufferKind {
     Shadow,
     Reflection,
     Refraction,
+    /// Issue 18: the raster fallbacks' terms (frames with fallbacks).
+    ShadowFallback,
+    ReflectionFallback,
+    RefractionFallback,
     /// Object ids in false colour (the dump's `object_id.png` holds the ids themselves).
     ObjectId,
     /// Paper 2: the packed RT frame's colour (scenes with point clouds).
@@ -41,7 +45,7 @@ pub enum BufferKind {
 
 impl BufferKind {
     /// Every buffer, in the order the viewer lists them.
-    pub const ALL: [BufferKind; 18] = [
+    pub const ALL: [BufferKind; 21] = [
         BufferKind::Final,
         BufferKind::Position,
         BufferKind::Normal,
@@ -56,6 +60,9 @@ impl BufferKind {
         BufferKind::Shadow,
         BufferKind::Reflection,
         BufferKind::Refraction,
+        BufferKind::ShadowFallback,
+        BufferKind::ReflectionFallback,
+        BufferKind::RefractionFallback,
         BufferKind::ObjectId,
         BufferKind::RtColor,
         BufferKind::RtDepth,
@@ -78,6 +85,9 @@ impl BufferKind {
             BufferKind::Shadow => "shadow",
             BufferKind::Reflection => "reflection",
             BufferKind::Refraction => "refraction",
+            BufferKind::ShadowFallback => "shadow_fallback",
+            BufferKind::ReflectionFallback => "reflection_fallback",
+            BufferKind::RefractionFallback => "refraction_fallback",
             BufferKind::ObjectId => "object_id",
             BufferKind::RtColor => "rt_color",
             BufferKind::RtDepth => "rt_depth",
@@ -93,6 +103,11 @@ impl BufferKind {
     /// Only frames of scenes with point clouds have it.
     pub fn needs_point_clouds(self) -> bool {
         matches!(self, BufferKind::RtColor | BufferKind::RtDepth | BufferKind::MergedDepth)
+    }
+
+    /// Only frames with raster fallbacks (`--fallback raster`, not `rt-only`) have it.
+    pub fn needs_fallback(self) -> bool {
+        matches!(self, BufferKind::ShadowFallback | BufferKind::ReflectionFallback | BufferKind::RefractionFallback)
     }
 }
 
@@ -198,6 +213,9 @@ pub fn view(kind: BufferKind, f: &FrameView) -> Option<BufferImage> {
         BufferKind::Shadow => full(srgb(&b.shadow)),
         BufferKind::Reflection => full(srgb(&b.reflection)),
         BufferKind::Refraction => full(srgb(&b.refraction)),
+        BufferKind::ShadowFallback => (!b.shadow_fallback.is_empty()).then(|| full(srgb(&b.shadow_fallback))).flatten(),
+        BufferKind::ReflectionFallback => (!b.reflection_fallback.is_empty()).then(|| full(srgb(&b.reflection_fallback))).flatten(),
+        BufferKind::RefractionFallback => (!b.refraction_fallback.is_empty()).then(|| full(srgb(&b.refraction_fallback))).flatten(),
         BufferKind::ObjectId => full(g.object_id.iter().map(|&id| object_id_color(id)).collect()),
         BufferKind::RtColor => f.rt_packed.map(|rt| BufferImage {
             width: rt.width,
@@ -258,6 +276,16 @@ mod tests {
         let g = GBuffer::new(2, 1);
         let b = FrameBuffers::new(2, 1);
         let f = FrameView { gbuffer: &g, buffers: &b, rt_packed: None };
+        for k in BufferKind::ALL {
+            assert_eq!(view(k, &f).is_some(), !k.needs_point_clouds() && !k.needs_fallback(), "{}", k.name());
+        }
+        let with = FrameBuffers {
+            shadow_fallback: vec![Vec3::ONE; 2],
+            reflection_fallback: vec![Vec3::ZERO; 2],
+            refraction_fallback: vec![Vec3::ZERO; 2],
+            ..b
+        };
+        let f = FrameView { gbuffer: &g, buffers: &with, rt_packed: None };
         for k in BufferKind::ALL {
             assert_eq!(view(k, &f).is_some(), !k.needs_point_clouds(), "{}", k.name());
         }

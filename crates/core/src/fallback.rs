@@ -412,22 +412,28 @@ impl ShadowMap {
     /// Points outside the map are lit.
     pub fn visibility(&self, p: Vec3, n: Vec3, to_light: Vec3, pcf_radius: u32) -> f32 {
         let v = &self.view;
-        // The texel's world size at the receiver.
-        let texel = if v.orthographic {
-            v.texel_world
-        } else {
-            let c = v.view_proj * p.extend(1.0);
-            v.texel_world * c.w.max(v.near)
-        };
+        let m = &v.view_proj;
+        // One projection: the receiver's clip position, then its normal offset added through
+        // the matrix's linear part (the offset is a direction).
+        let c = *m * p.extend(1.0);
+        // The texel's world size at the receiver (perspective: clip w is the view distance).
+        let texel = if v.orthographic { v.texel_world } else { v.texel_world * c.w.max(v.near) };
         let cos = n.dot(to_light).clamp(1e-3, 1.0);
         let tan = ((1.0 - cos * cos).max(0.0).sqrt() / cos).min(SHADOW_MAX_SLOPE);
-        let p = p + n * (texel * SHADOW_NORMAL_OFFSET_TEXELS);
-        let Some((uv, z)) = project(&v.view_proj, p) else { return 1.0 };
+        let o = n * (texel * SHADOW_NORMAL_OFFSET_TEXELS);
+        let c = c + m.x_axis * o.x + m.y_axis * o.y + m.z_axis * o.z;
+        if c.w <= 0.0 {
+            return 1.0;
+        }
+        let inv_w = 1.0 / c.w;
+        let (uv, z) = (Vec2::new(c.x * inv_w * 0.5 + 0.5, 0.5 - c.y * inv_w * 0.5), c.z * inv_w);
         if !(0.0..=1.0).contains(&uv.x) || !(0.0..=1.0).contains(&uv.y) || z > 1.0 {
             return 1.0;
         }
         let bias = texel * (SHADOW_BIAS_TEXELS + SHADOW_SLOPE_BIAS_TEXELS * tan);
-        let z_ref = v.depth_of(v.linear_depth(z) - bias);
+        // depth_of(linear_depth(z) − bias), without the round trip: orthographic depth is affine
+        // in distance, a perspective view's distance is clip w.
+        let z_ref = if v.orthographic { z + bias / (v.far - v.near) } else { v.depth_of(c.w - bias) };
         let r = pcf_radius as i32;
         if r == 0 {
             return self.compare_bilinear(uv, z_ref);
@@ -479,8 +485,11 @@ pub struct ProbePlan {
 }
 
 /// An object counts as room-sized (a floor, a wall, a pool) when it spans at least this share
-/// of the scene's extent along two axes.
+/// of the scene's extent along two axes and is thin (at most [`ROOM_SIZED_THICKNESS`] of the
+/// scene's extent) along the third: a flat surface of the room, which the room's box encloses
+/// (a ball that is the whole scene is not).
 pub const ROOM_SIZED_SHARE: f32 = 0.5;
+pub const ROOM_SIZED_THICKNESS: f32 = 0.1;
 
 /// One probe per object that reflects or refracts (and has geometry).
 pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
@@ -495,37 +504,72 @@ pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
             let ob = prepared.object_bounds[i];
             let e = ob.max - ob.min;
             let spans = (0..3).filter(|&a| extent[a] > 0.0 && e[a] >= ROOM_SIZED_SHARE * extent[a]).count();
+            let thin = (0..3).any(|a| e[a] <= ROOM_SIZED_THICKNESS * extent[a]);
             let centre = ob.center();
             let (near, far) = perspective_range(centre, bounds);
-            ProbePlan { object: i as u32, centre, parallax_box: (spans >= 2).then_some(*bounds), near, far }
+            ProbePlan { object: i as u32, centre, parallax_box: (spans >= 2 && thin).then_some(*bounds), near, far }
         })
         .collect()
 }
 
+/// Steps of a probe's depth-based parallax correction ([`Probe::lookup_direction`]): a march
+/// along the ray at quadratically spaced distances up to the probe's far plane, then a
+/// bisection between the last step in front of the seen surface and the first behind it. More
+/// steps find thinner surfaces and land closer, at the cost of a distance lookup each.
+pub const PROBE_MARCH_STEPS: u32 = 16;
+pub const PROBE_REFINE_STEPS: u32 = 5;
+
 /// A rendered probe: six faces of `size`², face after face in [`CUBE_FACES`] order, row-major,
-/// linear RGB of the lit scene (the skybox where nothing was drawn).
+/// linear RGB of the lit scene (the skybox where nothing was drawn), and per texel the distance
+/// from the centre to the surface seen (`plan.far` where nothing was drawn).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Probe {
     pub plan: ProbePlan,
     pub size: u32,
     pub texels: Vec<Vec3>,
-    face_vp: [Mat4; 6],
+    pub distance: Vec<f32>,
 }
 
 impl Probe {
     /// An unrendered probe (black faces) of `size`; the backend fills [`Probe::texels`] face by
     /// face from [`Probe::face_camera`].
     pub fn new(plan: ProbePlan, size: u32) -> Self {
-        let face_vp = std::array::from_fn(|f| cube_face_camera(plan.centre, f, plan.near, plan.far).view_projection(1.0));
-        Self { plan, size, texels: vec![Vec3::ZERO; 6 * size as usize * size as usize], face_vp }
+        let n = 6 * size as usize * size as usize;
+        Self { plan, size, texels: vec![Vec3::ZERO; n], distance: vec![plan.far; n] }
+    }
+
+    /// The face and UV a direction from the centre falls on: the face camera's projection
+    /// (90°, looking along the face's axis with its up vector), in closed form.
+    #[inline]
+    fn face_uv(&self, d: Vec3) -> Option<(usize, Vec2)> {
+        let face = cube_face(d);
+        let (forward, up) = CUBE_FACES[face];
+        let right = forward.cross(up);
+        let z = d.dot(forward);
+        if z <= 0.0 {
+            return None;
+        }
+        Some((face, Vec2::new(0.5 + 0.5 * d.dot(right) / z, 0.5 - 0.5 * d.dot(up) / z)))
+    }
+
+    /// The distance the probe saw along `d` (nearest texel; `plan.far` for nothing).
+    #[inline]
+    pub fn distance_along(&self, d: Vec3) -> f32 {
+        let Some((face, uv)) = self.face_uv(d) else { return self.plan.far };
+        let n = self.size as i32;
+        let (x, y) = (((uv.x * n as f32) as i32).clamp(0, n - 1), ((uv.y * n as f32) as i32).clamp(0, n - 1));
+        self.distance[face * (n * n) as usize + (y * n + x) as usize]
     }
 
     pub fn face_camera(&self, face: usize) -> Camera {
         cube_face_camera(self.plan.centre, face, self.plan.near, self.plan.far)
     }
 
-    /// The direction to look up for a ray from `p` along unit `dir`: `dir` itself, or with the
-    /// parallax box, from the probe's centre to where the ray leaves the box.
+    /// The direction to look up for a ray from `p` along unit `dir`, from the probe's centre to
+    /// where the ray meets the scene: with the parallax box, where the ray leaves the box; else
+    /// where it first goes behind the surface the probe saw (|y| > D(y), y = p + t·dir − centre,
+    /// D the distance the probe saw along y), marched in [`PROBE_MARCH_STEPS`] and refined in
+    /// [`PROBE_REFINE_STEPS`]; `dir` itself when it never does (it leaves towards the sky).
     #[inline]
     pub fn lookup_direction(&self, p: Vec3, dir: Vec3) -> Vec3 {
         match self.plan.parallax_box {
@@ -536,7 +580,32 @@ impl Probe {
                 let t_exit = t1.max(t2).min_element();
                 if t_exit.is_finite() && t_exit > 0.0 { p + dir * t_exit - self.plan.centre } else { dir }
             }
-            None => dir,
+            None => {
+                let c = self.plan.centre;
+                let far = self.plan.far;
+                // Behind the seen surface (where the probe saw one: not the sky).
+                let behind = |t: f32| {
+                    let y = p + dir * t - c;
+                    let (len, seen) = (y.length(), self.distance_along(y));
+                    len > 0.0 && seen < far * 0.999 && len > seen
+                };
+                let mut front = 0.0f32;
+                for k in 1..=PROBE_MARCH_STEPS {
+                    let s = k as f32 / PROBE_MARCH_STEPS as f32;
+                    let t = far * s * s;
+                    if behind(t) {
+                        let mut back = t;
+                        for _ in 0..PROBE_REFINE_STEPS {
+                            let mid = 0.5 * (front + back);
+                            if behind(mid) { back = mid } else { front = mid }
+                        }
+                        let y = p + dir * back - c;
+                        return if y.length_squared() > 0.0 { y } else { dir };
+                    }
+                    front = t;
+                }
+                dir
+            }
         }
     }
 
@@ -546,8 +615,7 @@ impl Probe {
         if d == Vec3::ZERO {
             return Vec3::ZERO;
         }
-        let face = cube_face(d);
-        let Some((uv, _)) = project(&self.face_vp[face], self.plan.centre + d) else { return Vec3::ZERO };
+        let Some((face, uv)) = self.face_uv(d) else { return Vec3::ZERO };
         let n = self.size as i32;
         let t = uv * n as f32 - Vec2::splat(0.5);
         let (x0, y0) = (t.x.floor(), t.y.floor());
@@ -773,6 +841,54 @@ mod tests {
         assert!((d - Vec3::new(5.0, 10.0, 0.0)).length() < 1e-5, "{d}");
         let far = Probe::new(ProbePlan { parallax_box: None, ..plan }, 4);
         assert_eq!(far.lookup_direction(Vec3::new(5.0, 0.0, 0.0), Vec3::Y), Vec3::Y);
+    }
+
+    #[test]
+    fn depth_parallax_finds_the_wall_the_ray_meets() {
+        // A probe at the origin inside a cube room of half-size 4 (distances: the exact distance
+        // to the wall along each texel's direction). A ray from (2, 0, 0) along +Z meets the
+        // wall z = 4 at (2, 0, 4): the lookup must point there, not along +Z.
+        let plan = ProbePlan { object: 0, centre: Vec3::ZERO, parallax_box: None, near: 0.01, far: 100.0 };
+        let mut probe = Probe::new(plan, 64);
+        for f in 0..6 {
+            let cam = probe.face_camera(f);
+            let inv = cam.view_projection(1.0).inverse();
+            for y in 0..64 {
+                for x in 0..64 {
+                    let ndc = Vec3::new((x as f32 + 0.5) / 32.0 - 1.0, 1.0 - (y as f32 + 0.5) / 32.0, 0.5);
+                    let d = (inv.project_point3(ndc)).normalize();
+                    probe.distance[f * 4096 + y * 64 + x] = 4.0 / d.abs().max_element();
+                }
+            }
+        }
+        let d = probe.lookup_direction(Vec3::new(2.0, 0.0, 0.0), Vec3::Z);
+        let want = Vec3::new(2.0, 0.0, 4.0);
+        assert!(d.normalize().angle_between(want.normalize()) < 0.03, "{d} vs {want}");
+        // Nothing seen (sky): the direction itself.
+        let sky = Probe::new(plan, 4);
+        assert_eq!(sky.lookup_direction(Vec3::new(2.0, 0.0, 0.0), Vec3::Z), Vec3::Z);
+    }
+
+    #[test]
+    fn closed_form_face_uv_is_the_face_cameras_projection() {
+        let plan = ProbePlan { object: 0, centre: Vec3::new(1.0, -2.0, 0.5), parallax_box: None, near: 0.1, far: 40.0 };
+        let probe = Probe::new(plan, 8);
+        let mut rng = 0x1234_5678u32;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 17;
+            rng ^= rng << 5;
+            rng as f32 / u32::MAX as f32 * 2.0 - 1.0
+        };
+        for _ in 0..1000 {
+            let d = Vec3::new(next(), next(), next());
+            if d.length() < 1e-3 {
+                continue;
+            }
+            let (face, uv) = probe.face_uv(d).unwrap();
+            let (want, _) = project(&probe.face_camera(face).view_projection(1.0), plan.centre + d).unwrap();
+            assert!((uv - want).abs().max_element() < 1e-4, "{d}: {uv} vs {want}");
+        }
     }
 
     #[test]

@@ -110,11 +110,13 @@ impl FallbackCache {
         let aspect = gbuffer.width as f32 / gbuffer.height.max(1) as f32;
         let spheres = if capsule.is_some() { &scene.point_clouds[..] } else { &[] };
         for lv in plan_light_views(scene, &self.bounds, camera, aspect, &self.settings) {
-            let old = self.maps[lv.light].take();
+            // Last frame's maps, moved (not copied) into this frame's where the view is the same.
+            let mut old: Vec<Option<ShadowMap>> =
+                self.maps[lv.light].take().map_or_else(Vec::new, |o| o.maps.into_iter().map(Some).collect());
             let mut maps = Vec::with_capacity(lv.views.len());
             for (k, view) in lv.views.iter().enumerate() {
-                match old.as_ref().and_then(|o| o.maps.get(k)).filter(|m| m.view == *view) {
-                    Some(m) => maps.push(m.clone()),
+                match old.get_mut(k).and_then(Option::take).filter(|m| m.view == *view) {
+                    Some(m) => maps.push(m),
                     None => {
                         let mut depth = raster::rasterize_depth(prepared, view.view_proj, view.size, &self.casters);
                         splat_spheres(view, spheres, &mut depth);
@@ -188,6 +190,9 @@ fn render_probe(prepared: &PreparedScene, mut capsule: Option<&mut PointCloudCap
         }
         let lit = lighting::deferred_lighting(&g, prepared.scene, &camera);
         probe.texels[face * texels..(face + 1) * texels].copy_from_slice(&lit);
+        for (d, (pos, &id)) in probe.distance[face * texels..(face + 1) * texels].iter_mut().zip(g.position.iter().zip(&g.object_id)) {
+            *d = if id == hybrid_core::NO_OBJECT { plan.far } else { pos.distance(plan.centre).min(plan.far) };
+        }
     }
     probe
 }

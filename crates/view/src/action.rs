@@ -24,6 +24,8 @@ pub enum Action {
     Highlight(Option<u32>),
     SetClipCapsule(bool),
     SetSphereEffects(bool),
+    /// `--fallback`: what unselected objects get (raster fallbacks or nothing).
+    SetFallback(hybrid_core::fallback::Fallback),
     SetPrimaryVisibility(PrimaryVisibility),
     /// Light `i` (directional, then point, then spot lights, in the scene file's order) on or off.
     SetLight(usize, bool),

@@ -83,6 +83,8 @@ pub struct ViewOptions {
     pub primary_visibility: PrimaryVisibility,
     /// GPU backend: hardware or software ray tracing (`--rt`).
     pub rt: RtChoice,
+    /// `--fallback`: raster fallbacks for unselected objects, or none (the paper).
+    pub fallback: hybrid_core::fallback::Fallback,
 }
 
 /// Why the viewer stopped with an error.
@@ -277,6 +279,7 @@ impl App {
                 sphere_effects: options.sphere_effects,
                 primary_visibility: options.primary_visibility,
                 rt: options.rt,
+                fallback: options.fallback,
             },
             heuristic,
             mode: options.mode,
@@ -548,6 +551,7 @@ impl App {
             }
             Action::SetClipCapsule(v) => self.set_knobs(|k| k.clip_capsule = v),
             Action::SetSphereEffects(v) => self.set_knobs(|k| k.sphere_effects = v),
+            Action::SetFallback(v) => self.set_knobs(|k| k.fallback = v),
             Action::SetPrimaryVisibility(v) => self.set_knobs(|k| k.primary_visibility = v),
             Action::SetLight(i, on) => {
                 if i >= self.info.lights_on.len() {
@@ -929,6 +933,7 @@ impl App {
             highlight: self.highlight,
             clip_capsule: self.knobs.clip_capsule,
             sphere_effects: self.knobs.sphere_effects,
+            fallback: self.knobs.fallback,
             primary_visibility: is_cpu.then_some(self.knobs.primary_visibility),
             lights: &lights,
             keyframes: self.recorder.keyframes.len(),

@@ -39,6 +39,8 @@ pub struct RendererKnobs {
     pub primary_visibility: PrimaryVisibility,
     /// GPU backend: hardware or software ray tracing (`--rt`).
     pub rt: RtChoice,
+    /// `--fallback`.
+    pub fallback: hybrid_core::fallback::Fallback,
 }
 
 impl OpenScene {
@@ -61,11 +63,13 @@ impl Renderer<'_> {
             Renderer::Cpu(r) => {
                 r.clip_capsule_at_raster_depth = knobs.clip_capsule;
                 r.spheres_in_trace = knobs.sphere_effects;
+                r.fallback = knobs.fallback;
                 r.set_capsule_visibility(knobs.primary_visibility);
             }
             Renderer::Gpu(r) => {
                 r.clip_capsule_at_raster_depth = knobs.clip_capsule;
                 r.spheres_in_trace = knobs.sphere_effects;
+                r.fallback = knobs.fallback;
             }
         }
     }

@@ -42,6 +42,8 @@ pub struct OverlayModel<'a> {
     pub highlight: Option<u32>,
     pub clip_capsule: bool,
     pub sphere_effects: bool,
+    /// `--fallback raster` (true) or `none`.
+    pub fallback: hybrid_core::fallback::Fallback,
     /// CPU backend only.
     pub primary_visibility: Option<PrimaryVisibility>,
     pub lights: &'a [(String, bool)],
@@ -394,7 +396,9 @@ fn buffers(ui: &mut egui::Ui, m: &OverlayModel, actions: &mut Vec<Action>) {
     ui.small("The buffer shown full-window (the same images as `hybrid render --dump`).");
     ui.horizontal_wrapped(|ui| {
         for k in BufferKind::ALL {
-            if k.needs_point_clouds() && !m.has_point_clouds {
+            if (k.needs_point_clouds() && !m.has_point_clouds)
+                || (k.needs_fallback() && m.fallback == hybrid_core::fallback::Fallback::None)
+            {
                 continue;
             }
             if ui.selectable_label(m.buffer == k, k.name()).clicked() && m.buffer != k {
@@ -405,6 +409,14 @@ fn buffers(ui: &mut egui::Ui, m: &OverlayModel, actions: &mut Vec<Action>) {
 }
 
 fn scene(ui: &mut egui::Ui, m: &OverlayModel, actions: &mut Vec<Action>) {
+    let mut raster = m.fallback == hybrid_core::fallback::Fallback::Raster;
+    if ui
+        .checkbox(&mut raster, "raster fallbacks")
+        .on_hover_text("objects the heuristic did not select get shadow maps and probes instead of no effects, at the cost of rendering the maps (cached) and a lookup per pixel; off: the paper")
+        .changed()
+    {
+        actions.push(Action::SetFallback(if raster { hybrid_core::fallback::Fallback::Raster } else { hybrid_core::fallback::Fallback::None }));
+    }
     if m.has_point_clouds {
         ui.label("point clouds");
         let mut clip = m.clip_capsule;

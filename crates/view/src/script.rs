@@ -15,7 +15,7 @@
 //! screenshot PATH     # the frame at full window size (no overlay) as PNG, report JSON beside it
 //! set mode hybrid     # what the overlay's controls set: mode hybrid|all|rt-only|raster,
 //! set budget 250      #   budget unlimited|COST|MSms, policy paper|knapsack, importance I,
-//! set buffer mask     #   buffer NAME (a --dump name), clip on|off, sphere-effects on|off,
+//! set buffer mask     #   buffer NAME (a --dump name), clip on|off, sphere-effects on|off, fallback raster|none,
 //!                     #   primary-visibility auto|projected|bvh, light N on|off (N from 1)
 //! weights N K E       # object N's K (static relevance) and E (estimated cost), as in the table
 //! highlight N         # tint object N (index in the scene's object list), or `highlight none`
@@ -200,6 +200,10 @@ pub fn parse(path: &Path, text: &str) -> Result<Vec<Event>, String> {
                     })?),
                     "clip" => Action::SetClipCapsule(on_off(v)?),
                     "sphere-effects" => Action::SetSphereEffects(on_off(v)?),
+                    "fallback" => Action::SetFallback(
+                        hybrid_core::fallback::Fallback::parse(v)
+                            .ok_or_else(|| err(&format!("`fallback` takes raster or none, got `{v}`")))?,
+                    ),
                     "primary-visibility" => Action::SetPrimaryVisibility(match v {
                         "auto" => PrimaryVisibility::Auto,
                         "projected" => PrimaryVisibility::Projected,

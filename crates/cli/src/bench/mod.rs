@@ -24,6 +24,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
+use hybrid_core::fallback::Fallback;
 use hybrid_core::report::{FrameReport, StageTimings};
 use hybrid_core::{FrameSettings, Mode};
 use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene_or_model_within};
@@ -92,7 +93,8 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
     let total =
         planned_frames(&modes, args.frames as usize, plan.path_shots.as_ref().map(Vec::len), args.flip_every as usize, args.sweep_budget);
     let progress = progress_bar(args.quiet, total);
-    let bench = Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options, progress };
+    let bench =
+        Bench { scene_name: name.clone(), size: args.size, quiet: args.quiet, backend, options: std::cell::Cell::new(options), progress };
     if !args.quiet {
         eprintln!(
             "bench {name}: {}x{}, {} static frame{}, modes {}",
@@ -160,29 +162,35 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
             .unwrap_or(0.0);
         let keep_every = if plan.path_shots.is_some() { k } else { shots.len() };
         let original = scene.heuristic.clone();
-        for policy in [Policy::Paper, Policy::Knapsack] {
-            for fraction in SWEEP_FRACTIONS {
-                let budget = fraction * all_cost;
-                scene.heuristic.policy = policy;
-                scene.heuristic.budget = Budget::Cost(budget);
-                let keep = |i: usize| if keep_every == shots.len() { i == last } else { i.is_multiple_of(keep_every) };
-                let mut pass = bench.pass(&scene, "sweep", Mode::Hybrid, shots, &keep)?;
-                bench.add_flip(&mut pass, reference);
-                let recs: Vec<&FrameRecord> = pass.records.iter().collect();
-                let frame = stat(&recs.iter().map(|r| r.timings.frame).collect::<Vec<_>>());
-                sweep.push(SweepPoint {
-                    policy: policy_name(policy),
-                    fraction,
-                    budget,
-                    frames: recs.len(),
-                    mean_frame_ms: frame.mean,
-                    p95_frame_ms: frame.p95,
-                    mean_trace_ms: mean(recs.iter().map(|r| r.timings.trace)).unwrap_or(0.0),
-                    mean_flip: mean(recs.iter().filter_map(|r| r.flip.map(f64::from))),
-                    mean_churn: mean(recs.iter().filter_map(|r| r.churn.map(|c| c as f64))),
-                });
+        // Both fallbacks on one chart (issue 18): the paper's (`none`) and the raster fallbacks.
+        for fallback in [Fallback::None, Fallback::Raster] {
+            bench.options.set(RenderOptions { fallback, ..options });
+            for policy in [Policy::Paper, Policy::Knapsack] {
+                for fraction in SWEEP_FRACTIONS {
+                    let budget = fraction * all_cost;
+                    scene.heuristic.policy = policy;
+                    scene.heuristic.budget = Budget::Cost(budget);
+                    let keep = |i: usize| if keep_every == shots.len() { i == last } else { i.is_multiple_of(keep_every) };
+                    let mut pass = bench.pass(&scene, "sweep", Mode::Hybrid, shots, &keep)?;
+                    bench.add_flip(&mut pass, reference);
+                    let recs: Vec<&FrameRecord> = pass.records.iter().collect();
+                    let frame = stat(&recs.iter().map(|r| r.timings.frame).collect::<Vec<_>>());
+                    sweep.push(SweepPoint {
+                        policy: policy_name(policy),
+                        fallback: fallback.as_str(),
+                        fraction,
+                        budget,
+                        frames: recs.len(),
+                        mean_frame_ms: frame.mean,
+                        p95_frame_ms: frame.p95,
+                        mean_trace_ms: mean(recs.iter().map(|r| r.timings.trace)).unwrap_or(0.0),
+                        mean_flip: mean(recs.iter().filter_map(|r| r.flip.map(f64::from))),
+                        mean_churn: mean(recs.iter().filter_map(|r| r.churn.map(|c| c as f64))),
+                    });
+                }
             }
         }
+        bench.options.set(options);
         scene.heuristic = original;
     }
 
@@ -228,6 +236,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
             "importance": scene.heuristic.importance,
             "clip_capsule": options.clip_capsule,
             "sphere_effects": options.sphere_effects,
+            "fallback": options.fallback.as_str(),
             "capsule_visibility": options.capsule_visibility.name(),
             // The traversal that traced (GPU backend: "hw" or "sw"; the CPU backend: "cpu").
             "rt": rt_used,
@@ -288,7 +297,8 @@ fn planned_frames(modes: &[Mode], frames: usize, path_frames: Option<usize>, fli
         total += modes.iter().filter(|m| **m != Mode::RtOnly).count() as u64 * pass(n);
     }
     if sweep {
-        total += 2 * SWEEP_FRACTIONS.len() as u64 * pass(path_frames.unwrap_or(frames));
+        // Two fallbacks × two policies × the fractions.
+        total += 4 * SWEEP_FRACTIONS.len() as u64 * pass(path_frames.unwrap_or(frames));
     }
     total
 }
@@ -316,10 +326,10 @@ mod tests {
         // Default modes, 20 static frames, a 40-frame path, FLIP every 10th, no sweep:
         // static 3 × 22; path reference 2 + 4, hybrid and all 2 × 42.
         assert_eq!(planned_frames(&[h, a, r], 20, Some(40), 10, false), 66 + 6 + 84);
-        // With the sweep on the path: + 10 × 42.
-        assert_eq!(planned_frames(&[h, a, r], 20, Some(40), 10, true), 66 + 6 + 84 + 420);
-        // No path, sweep without rt-only: static 1 × 22, the 1-frame reference 3, the sweep 10 × 22.
-        assert_eq!(planned_frames(&[h], 20, None, 10, true), 22 + 3 + 220);
+        // With the sweep on the path (2 fallbacks × 2 policies × 5 fractions): + 20 × 42.
+        assert_eq!(planned_frames(&[h, a, r], 20, Some(40), 10, true), 66 + 6 + 84 + 840);
+        // No path, sweep without rt-only: static 1 × 22, the 1-frame reference 3, the sweep 20 × 22.
+        assert_eq!(planned_frames(&[h], 20, None, 10, true), 22 + 3 + 440);
         // 41 path frames every 10th: 5 reference frames.
         assert_eq!(planned_frames(&[r], 1, Some(41), 10, false), 3 + 7);
     }

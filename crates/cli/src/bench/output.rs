@@ -79,7 +79,7 @@ pub(super) fn frames_csv<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> 
     s
 }
 
-pub const SWEEP_CSV_HEADER: &str = "policy,fraction,budget,frames,mean_frame_ms,p95_frame_ms,mean_trace_ms,mean_flip,mean_churn";
+pub const SWEEP_CSV_HEADER: &str = "policy,fraction,budget,frames,mean_frame_ms,p95_frame_ms,mean_trace_ms,mean_flip,mean_churn,fallback";
 
 pub(super) fn sweep_csv(points: &[SweepPoint]) -> String {
     let mut s = String::from(SWEEP_CSV_HEADER);
@@ -87,7 +87,7 @@ pub(super) fn sweep_csv(points: &[SweepPoint]) -> String {
     for p in points {
         let _ = writeln!(
             s,
-            "{},{},{:.1},{},{:.3},{:.3},{:.3},{},{}",
+            "{},{},{:.1},{},{:.3},{:.3},{:.3},{},{},{}",
             p.policy,
             p.fraction,
             p.budget,
@@ -96,7 +96,8 @@ pub(super) fn sweep_csv(points: &[SweepPoint]) -> String {
             p.p95_frame_ms,
             p.mean_trace_ms,
             opt(p.mean_flip.map(|f| format!("{f:.5}"))),
-            opt(p.mean_churn.map(|c| format!("{c:.3}")))
+            opt(p.mean_churn.map(|c| format!("{c:.3}"))),
+            p.fallback
         );
     }
     s
@@ -146,12 +147,16 @@ pub(super) fn frame_time_chart(name: &str, static_passes: &[(Mode, Pass)], path_
 }
 
 pub(super) fn sweep_chart(name: &str, points: &[SweepPoint]) -> Chart<'static> {
-    let series = ["paper", "knapsack"]
+    let series = [("paper", "none", 0), ("knapsack", "none", 1), ("paper", "raster", 2), ("knapsack", "raster", 3)]
         .iter()
-        .map(|&policy| {
-            let pts: Vec<(f64, f64)> =
-                points.iter().filter(|p| p.policy == policy).filter_map(|p| p.mean_flip.map(|f| (p.mean_frame_ms, f))).collect();
-            Series { name: format!("policy {policy}"), points: pts, markers: true, color: if policy == "paper" { 0 } else { 1 } }
+        .filter(|(policy, fallback, _)| points.iter().any(|p| p.policy == *policy && p.fallback == *fallback))
+        .map(|&(policy, fallback, color)| {
+            let pts: Vec<(f64, f64)> = points
+                .iter()
+                .filter(|p| p.policy == policy && p.fallback == fallback)
+                .filter_map(|p| p.mean_flip.map(|f| (p.mean_frame_ms, f)))
+                .collect();
+            Series { name: format!("policy {policy}, --fallback {fallback}"), points: pts, markers: true, color }
         })
         .collect();
     Chart {
@@ -283,12 +288,13 @@ pub(super) fn markdown(
         let _ = writeln!(s, "## Budget sweep (fractions of the mean all-selected cost)\n");
         let _ = writeln!(
             s,
-            "| policy | fraction | budget (cost) | frame ms mean (p95) | RAYT ms | mean FLIP | churn |\n|---|---|---|---|---|---|---|"
+            "| fallback | policy | fraction | budget (cost) | frame ms mean (p95) | RAYT ms | mean FLIP | churn |\n|---|---|---|---|---|---|---|---|"
         );
         for p in sweep {
             let _ = writeln!(
                 s,
-                "| {} | {:.2} | {:.0} | {:.2} ({:.2}) | {:.2} | {} | {} |",
+                "| {} | {} | {:.2} | {:.0} | {:.2} ({:.2}) | {:.2} | {} | {} |",
+                p.fallback,
                 p.policy,
                 p.fraction,
                 p.budget,

@@ -56,7 +56,8 @@ pub(super) struct Bench {
     pub(super) size: (u32, u32),
     pub(super) quiet: bool,
     pub(super) backend: Backend,
-    pub(super) options: RenderOptions,
+    /// The render options of every pass (a cell: the budget sweep switches `--fallback`).
+    pub(super) options: std::cell::Cell<RenderOptions>,
     /// One bar over every frame of the run (warm-ups included): set, mode, frame n of N, ETA.
     /// Hidden with `--quiet` and when stderr is not a terminal.
     pub(super) progress: ProgressBar,
@@ -86,7 +87,7 @@ impl Bench {
         self.progress.set_message(what.clone());
         let (width, height) = self.size;
         let settings = FrameSettings { width, height, mode };
-        let mut renderer = AnyRenderer::new(&self.backend, scene, &self.scene_name, self.options)?;
+        let mut renderer = AnyRenderer::new(&self.backend, scene, &self.scene_name, self.options.get())?;
         if let Some(first) = shots.first() {
             for _ in 0..WARMUP_FRAMES {
                 let frame = renderer.render(&first.camera, settings, &mut |_| {})?;

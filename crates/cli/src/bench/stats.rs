@@ -141,6 +141,8 @@ pub(super) fn path_summary(records: &[&FrameRecord]) -> PathSummary {
 #[derive(Debug, Serialize)]
 pub(super) struct SweepPoint {
     pub(super) policy: &'static str,
+    /// `--fallback` of the point's pass (the sweep runs both).
+    pub(super) fallback: &'static str,
     pub(super) fraction: f64,
     pub(super) budget: f64,
     pub(super) frames: usize,
