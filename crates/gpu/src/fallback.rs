@@ -32,6 +32,7 @@ use wgpu::util::DeviceExt;
 
 use crate::capsule::GpuCapsule;
 use crate::context::{GpuContext, GpuError};
+use crate::heuristic::compute_pipeline;
 use crate::lighting::LightingPass;
 use crate::raster::RasterPass;
 use crate::scene::SceneGpu;
@@ -44,6 +45,8 @@ use crate::timing::StageTimer;
 pub const SHADOW_VIEW_WGSL: &str = include_str!("shaders/shadow_view.wgsl");
 /// WGSL of the shadow-map pass (common/*.wgsl is prepended).
 pub const SHADOW_DEPTH_WGSL: &str = include_str!("shaders/shadow_depth.wgsl");
+/// WGSL of the probe faces' distance pass (the constants header is prepended).
+pub const PROBE_DISTANCE_WGSL: &str = include_str!("shaders/probe_distance.wgsl");
 /// WGSL of the lookup pass (common/*.wgsl is prepended).
 pub const FALLBACK_WGSL: &str = include_str!("shaders/fallback.wgsl");
 
@@ -88,13 +91,23 @@ pub struct GpuShadowLight {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct GpuProbe {
+    /// w = the far plane (the distance where nothing was seen).
     pub centre: [f32; 4],
     /// w = 1: box-projected against `[box_min, box_max]`.
     pub box_min: [f32; 4],
     pub box_max: [f32; 4],
     /// Rendered (0/1), first layer of its six faces, -, -.
     pub info: [u32; 4],
-    pub face_vp: [[[f32; 4]; 4]; 6],
+}
+
+/// `ProbeFace` of probe_distance.wgsl: the face being rendered.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct GpuProbeFace {
+    /// w = the far plane.
+    pub centre: [f32; 4],
+    /// x = the face's first texel in the distance buffer.
+    pub base: [u32; 4],
 }
 
 /// `FallbackParams` of fallback.wgsl.
@@ -192,6 +205,11 @@ pub struct FallbackGpu {
     probe_faces: wgpu::Texture,
     probe_faces_view: wgpu::TextureView,
     probes: wgpu::Buffer,
+    /// Per probe texel: the distance the probe saw (`Probe::distance`).
+    probe_distances: wgpu::Buffer,
+    probe_face: wgpu::Buffer,
+    distance_pipeline: wgpu::ComputePipeline,
+    distance_layout: wgpu::BindGroupLayout,
     probe_targets: Option<FrameTargets>,
     /// The capsule's hit ids of a probe face (not the frame's).
     probe_hit_ids: Option<wgpu::Buffer>,
@@ -302,14 +320,12 @@ impl FallbackGpu {
         let mut layers = 0u32;
         for plan in plan_probes(prepared, &scene_bounds(prepared, false)) {
             let o = plan.object as usize;
-            let probe = Probe::new(plan, settings.probe_size);
             let b = plan.parallax_box.unwrap_or(Aabb::EMPTY);
             probe_data[o] = GpuProbe {
-                centre: plan.centre.extend(1.0).to_array(),
+                centre: plan.centre.extend(plan.far).to_array(),
                 box_min: b.min.extend(if plan.parallax_box.is_some() { 1.0 } else { 0.0 }).to_array(),
                 box_max: b.max.extend(0.0).to_array(),
                 info: [0, layers, 0, 0],
-                face_vp: std::array::from_fn(|f| probe.face_camera(f).view_projection(1.0).to_cols_array_2d()),
             };
             plans[o] = Some((plan, layers));
             layers += 6;
@@ -337,6 +353,20 @@ impl FallbackGpu {
             contents: bytemuck::cast_slice(&probe_data),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         });
+        let texels = u64::from(settings.probe_size) * u64::from(settings.probe_size);
+        let probe_distances = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("fallback.probe_distances"),
+            size: u64::from(layers.max(1)) * texels * 4,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let probe_face = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("fallback.probe_face"),
+            size: std::mem::size_of::<GpuProbeFace>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let (distance_pipeline, distance_layout) = distance_pipeline(device);
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("fallback.params"),
             contents: bytemuck::bytes_of(&GpuFallbackParams {
@@ -375,6 +405,10 @@ impl FallbackGpu {
             probe_faces,
             probe_faces_view,
             probes,
+            probe_distances,
+            probe_face,
+            distance_pipeline,
+            distance_layout,
             probe_targets: None,
             probe_hit_ids: None,
             params,
@@ -486,6 +520,9 @@ impl FallbackGpu {
             for face in 0..6u32 {
                 let camera = probe.face_camera(face as usize);
                 scene_gpu.write_uniforms(ctx, &camera, size, size, &scene.environment);
+                let face_info =
+                    GpuProbeFace { centre: plan.centre.extend(plan.far).to_array(), base: [(first_layer + face) * size * size, 0, 0, 0] };
+                ctx.queue.write_buffer(&self.probe_face, 0, bytemuck::bytes_of(&face_info));
                 let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fallback: probe face") });
                 if let Some((capsule, spheres)) = capsule {
                     let ids = self.probe_hit_ids.get_or_insert_with(|| {
@@ -501,6 +538,26 @@ impl FallbackGpu {
                 }
                 raster.encode_triangles(&mut enc, scene_gpu, targets, capsule.is_none(), &ranges, &mut timer);
                 lighting.encode(&mut enc, scene_gpu, targets, &mut timer);
+                // The distance to what each texel saw (the lookups' parallax march).
+                let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("fallback.probe_distance"),
+                    layout: &self.distance_layout,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: wgpu::BindingResource::TextureView(&targets.position.view) },
+                        wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&targets.object_id.view) },
+                        wgpu::BindGroupEntry { binding: 2, resource: self.probe_distances.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 3, resource: self.probe_face.as_entire_binding() },
+                    ],
+                });
+                {
+                    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                        label: Some("fallback: probe distances"),
+                        timestamp_writes: None,
+                    });
+                    pass.set_pipeline(&self.distance_pipeline);
+                    pass.set_bind_group(0, &bind_group, &[]);
+                    pass.dispatch_workgroups(size.div_ceil(GROUP), size.div_ceil(GROUP), 1);
+                }
                 enc.copy_texture_to_texture(
                     targets.lighting.texture.as_image_copy(),
                     wgpu::TexelCopyTextureInfo {
@@ -617,6 +674,7 @@ impl FallbackGpu {
             texture(14, &self.probe_faces_view),
             (15, self.probes.as_entire_binding()),
             (16, self.params.as_entire_binding()),
+            (17, self.probe_distances.as_entire_binding()),
         ];
         let entries: Vec<wgpu::BindGroupEntry> =
             resources.into_iter().map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }).collect();
@@ -702,7 +760,37 @@ fn depth_pipelines(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::RenderPipe
     (pipeline("fallback.depth", "vs_shadow", None), pipeline("fallback.discs", "vs_disc", Some("fs_disc")), layout)
 }
 
-/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–16).
+/// The probe faces' distance pass (probe_distance.wgsl) and its group 0.
+fn distance_pipeline(device: &wgpu::Device) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
+    let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty,
+        count: None,
+    };
+    let texture =
+        |sample_type| wgpu::BindingType::Texture { sample_type, view_dimension: wgpu::TextureViewDimension::D2, multisampled: false };
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("fallback.probe_distance"),
+        entries: &[
+            entry(0, texture(wgpu::TextureSampleType::Float { filterable: false })),
+            entry(1, texture(wgpu::TextureSampleType::Uint)),
+            entry(
+                2,
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only: false },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+            ),
+            entry(3, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }),
+        ],
+    });
+    let pipeline = compute_pipeline(device, "fallback.probe_distance", PROBE_DISTANCE_WGSL, "probe_distance", &layout);
+    (pipeline, layout)
+}
+
+/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–17).
 fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
     let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
         binding,
@@ -738,6 +826,7 @@ fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePip
         entry(14, texture(float, wgpu::TextureViewDimension::D2Array)),
         entry(15, buffer(true)),
         entry(16, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }),
+        entry(17, buffer(true)),
     ];
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("fallback.lookup"), entries: &entries });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -773,7 +862,19 @@ mod tests {
     #[test]
     fn shader_constants_match_rust() {
         assert!(FALLBACK_WGSL.contains(&format!("@workgroup_size({GROUP}, {GROUP})")));
-        for name in ["SHADOW_DIRECTIONAL", "SHADOW_POINT", "SHADOW_ARRAY_CUBE", "SHADOW_MAX_SLOPE", "SHADOW_BIAS_TEXELS"] {
+        assert!(PROBE_DISTANCE_WGSL.contains(&format!("@workgroup_size({GROUP}, {GROUP}, 1)")));
+        if let Err(e) = shaders::validate(&format!("{}\n{PROBE_DISTANCE_WGSL}", shaders::constants())) {
+            panic!("probe_distance.wgsl: {e}");
+        }
+        for name in [
+            "SHADOW_DIRECTIONAL",
+            "SHADOW_POINT",
+            "SHADOW_ARRAY_CUBE",
+            "SHADOW_MAX_SLOPE",
+            "SHADOW_BIAS_TEXELS",
+            "PROBE_MARCH_STEPS",
+            "CUBE_FACE_UP",
+        ] {
             assert!(FALLBACK_WGSL.contains(name) && !FALLBACK_WGSL.contains(&format!("const {name}")), "{name}");
         }
     }

@@ -77,10 +77,13 @@ fn fallback_structs_match_their_wgsl_layouts() {
         [
             layout!(GpuShadowView, "ShadowViewGpu", [view_proj, near, far, texel_world, split_far, size, orthographic, array_index, layer]),
             layout!(GpuShadowLight, "ShadowLightGpu", [kind, first_view, view_count, _pad]),
-            layout!(GpuProbe, "ProbeGpu", [centre, box_min, box_max, info, face_vp]),
+            layout!(GpuProbe, "ProbeGpu", [centre, box_min, box_max, info]),
             layout!(GpuFallbackParams, "FallbackParams", [pcf_radius, probe_size, _pad0, _pad1]),
         ],
     );
+    let source = format!("{}\n{}", crate::shaders::constants(), crate::fallback::PROBE_DISTANCE_WGSL);
+    let module = naga::front::wgsl::parse_str(&source).expect("the probe distance pass's WGSL parses");
+    check(&module, [layout!(crate::fallback::GpuProbeFace, "ProbeFace", [centre, base])]);
     // The shadow-map pass reads the views and the spheres with its own copy of `Sphere`.
     let source = with_common(&format!("{SHADOW_VIEW_WGSL}\n{SHADOW_DEPTH_WGSL}"));
     let module = naga::front::wgsl::parse_str(&source).expect("the shadow-map pass's WGSL parses");

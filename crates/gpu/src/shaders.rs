@@ -52,6 +52,8 @@ pub fn constants() -> String {
         ("SHADOW_POINT", crate::fallback::SHADOW_POINT),
         ("SHADOW_ARRAY_MAPS", crate::fallback::SHADOW_ARRAY_MAPS),
         ("SHADOW_ARRAY_CUBE", crate::fallback::SHADOW_ARRAY_CUBE),
+        ("PROBE_MARCH_STEPS", hybrid_core::fallback::PROBE_MARCH_STEPS),
+        ("PROBE_REFINE_STEPS", hybrid_core::fallback::PROBE_REFINE_STEPS),
     ];
     // The sky kind is an i32 in WGSL (compared with a signed uniform field).
     let i32s = [("SKY_COLOR", SKY_COLOR), ("SKY_GRADIENT", SKY_GRADIENT), ("SKY_CUBE", SKY_CUBE)];
@@ -76,6 +78,14 @@ pub fn constants() -> String {
         // an exponent, so WGSL reads it as a float).
         out += &format!("const {name}: f32 = {v:?};\n");
     }
+    // The cube faces' axes (hybrid_core::fallback::CUBE_FACES: +X, −X, +Y, −Y, +Z, −Z).
+    let vec3s = |pick: fn(&(glam::Vec3, glam::Vec3)) -> glam::Vec3| {
+        let v: Vec<String> =
+            fb::CUBE_FACES.iter().map(|f| pick(f)).map(|v| format!("vec3<f32>({:?}, {:?}, {:?})", v.x, v.y, v.z)).collect();
+        v.join(", ")
+    };
+    out += &format!("const CUBE_FACE_FORWARD: array<vec3<f32>, 6> = array<vec3<f32>, 6>({});\n", vec3s(|f| f.0));
+    out += &format!("const CUBE_FACE_UP: array<vec3<f32>, 6> = array<vec3<f32>, 6>({});\n", vec3s(|f| f.1));
     out
 }
 
@@ -150,6 +160,7 @@ fn probe() {
             ("shadow_depth.wgsl", crate::fallback::SHADOW_DEPTH_WGSL),
             ("fallback.wgsl", crate::fallback::FALLBACK_WGSL),
             ("shadow_view.wgsl", crate::fallback::SHADOW_VIEW_WGSL),
+            ("probe_distance.wgsl", crate::fallback::PROBE_DISTANCE_WGSL),
         ];
         let names: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("const ")).map(|l| l.split(':').next().unwrap()).collect();
         assert!(names.len() >= 18, "{header}");

@@ -13,11 +13,10 @@ struct ShadowLightGpu {
 
 // Per object: its probe (hybrid_core::fallback::Probe), if rendered.
 struct ProbeGpu {
-    centre: vec4<f32>,
+    centre: vec4<f32>,  // w = the far plane (the distance where nothing was seen)
     box_min: vec4<f32>, // w = 1: box-projected against [box_min, box_max]
     box_max: vec4<f32>,
     info: vec4<u32>,    // rendered, first layer (+ face), -, -
-    face_vp: array<mat4x4<f32>, 6>,
 }
 
 struct FallbackParams {
@@ -44,6 +43,8 @@ struct FallbackParams {
 @group(1) @binding(14) var probe_faces: texture_2d_array<f32>;
 @group(1) @binding(15) var<storage, read> probes: array<ProbeGpu>;
 @group(1) @binding(16) var<uniform> params: FallbackParams;
+// Per probe texel (layer after layer, row-major): the distance from the centre to the surface seen.
+@group(1) @binding(17) var<storage, read> probe_distances: array<f32>;
 
 // ShadowMap::lit: 1 where texel (x, y), clamped to the map, is no nearer than z_ref.
 fn lit(v: ShadowViewGpu, x: i32, y: i32, z_ref: f32) -> f32 {
@@ -73,24 +74,37 @@ fn compare_bilinear(v: ShadowViewGpu, uv: vec2<f32>, z_ref: f32) -> f32 {
 
 // ShadowMap::visibility: normal offset, slope-scaled bias, PCF; points outside the map are lit.
 fn visibility(v: ShadowViewGpu, p: vec3<f32>, n: vec3<f32>, to_light: vec3<f32>) -> f32 {
+    let m = v.view_proj;
+    // One projection: the receiver's clip position, then its normal offset added through the
+    // matrix's linear part (the offset is a direction).
+    let c0 = m * vec4<f32>(p, 1.0);
+    // The texel's world size at the receiver (perspective: clip w is the view distance).
     var texel = v.texel_world;
     if v.orthographic == 0u {
-        let c = v.view_proj * vec4<f32>(p, 1.0);
-        texel = v.texel_world * max(c.w, v.near);
+        texel = v.texel_world * max(c0.w, v.near);
     }
     let cos_l = clamp(dot(n, to_light), 1e-3, 1.0);
     let tan_l = min(sqrt(max(1.0 - cos_l * cos_l, 0.0)) / cos_l, SHADOW_MAX_SLOPE);
-    let q = p + n * (texel * SHADOW_NORMAL_OFFSET_TEXELS);
-    let pr = project_point(v.view_proj, q);
-    if !pr.valid {
+    let o = n * (texel * SHADOW_NORMAL_OFFSET_TEXELS);
+    let c = c0 + m[0] * o.x + m[1] * o.y + m[2] * o.z;
+    if c.w <= 0.0 {
         return 1.0;
     }
-    let uv = pr.uv;
-    if !(uv.x >= 0.0 && uv.x <= 1.0 && uv.y >= 0.0 && uv.y <= 1.0) || pr.z > 1.0 {
+    let inv_w = 1.0 / c.w;
+    let uv = vec2<f32>(c.x * inv_w * 0.5 + 0.5, 0.5 - c.y * inv_w * 0.5);
+    let z = c.z * inv_w;
+    if !(uv.x >= 0.0 && uv.x <= 1.0 && uv.y >= 0.0 && uv.y <= 1.0) || z > 1.0 {
         return 1.0;
     }
     let bias = texel * (SHADOW_BIAS_TEXELS + SHADOW_SLOPE_BIAS_TEXELS * tan_l);
-    let z_ref = depth_of(v, linear_depth(v, pr.z) - bias);
+    // depth_of(linear_depth(z) − bias) without the round trip: orthographic depth is affine in
+    // distance, a perspective view's distance is clip w.
+    var z_ref: f32;
+    if v.orthographic != 0u {
+        z_ref = z + bias / (v.far - v.near);
+    } else {
+        z_ref = depth_of(v, c.w - bias);
+    }
     let r = i32(params.pcf_radius);
     if r == 0 {
         return compare_bilinear(v, uv, z_ref);
@@ -150,10 +164,52 @@ fn blinn_phong_incident(l: vec3<f32>, radiance: vec3<f32>, s: Surface, view: vec
     return (s.diffuse * n_dot_l + spec) * radiance;
 }
 
-// Probe::sample: the probe's colour for a ray from p along unit dir (box-projected where the
-// probe has a box; bilinear within the face, clamped to it).
-fn probe_sample(pr: ProbeGpu, p: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
-    var d = dir;
+// Probe::face_uv: the face and UV a direction from the centre falls on (the face camera's
+// projection in closed form); valid = false behind the face.
+struct FaceUv {
+    face: u32,
+    uv: vec2<f32>,
+    valid: bool,
+}
+
+fn face_uv(d: vec3<f32>) -> FaceUv {
+    let face = cube_face_of(d);
+    let forward = CUBE_FACE_FORWARD[face];
+    let up = CUBE_FACE_UP[face];
+    let right = cross(forward, up);
+    let z = dot(d, forward);
+    if z <= 0.0 {
+        return FaceUv(face, vec2<f32>(0.0), false);
+    }
+    return FaceUv(face, vec2<f32>(0.5 + 0.5 * dot(d, right) / z, 0.5 - 0.5 * dot(d, up) / z), true);
+}
+
+// Probe::distance_along: the distance the probe saw along d (nearest texel; far for nothing).
+fn distance_along(pr: ProbeGpu, d: vec3<f32>) -> f32 {
+    let far = pr.centre.w;
+    let f = face_uv(d);
+    if !f.valid {
+        return far;
+    }
+    let n = i32(params.probe_size);
+    let x = clamp(i32(f.uv.x * f32(n)), 0, n - 1);
+    let y = clamp(i32(f.uv.y * f32(n)), 0, n - 1);
+    return probe_distances[(pr.info.y + f.face) * u32(n * n) + u32(y * n + x)];
+}
+
+// Behind the surface the probe saw along p + t·dir (where it saw one: not the sky).
+fn behind(pr: ProbeGpu, p: vec3<f32>, dir: vec3<f32>, t: f32) -> bool {
+    let y = p + dir * t - pr.centre.xyz;
+    let len = length(y);
+    let seen = distance_along(pr, y);
+    return len > 0.0 && seen < pr.centre.w * 0.999 && len > seen;
+}
+
+// Probe::lookup_direction: from the probe's centre to where the ray meets the scene: where it
+// leaves the parallax box, or where it first goes behind the surface the probe saw (marched in
+// PROBE_MARCH_STEPS quadratic steps to the far plane, refined in PROBE_REFINE_STEPS bisections);
+// dir itself when it never does.
+fn lookup_direction(pr: ProbeGpu, p: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
     if pr.box_min.w > 0.5 {
         let inv = vec3<f32>(1.0) / dir;
         let t1 = (pr.box_min.xyz - p) * inv;
@@ -161,25 +217,55 @@ fn probe_sample(pr: ProbeGpu, p: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
         let tm = max(t1, t2);
         let t_exit = min(tm.x, min(tm.y, tm.z));
         if is_finite(t_exit) && t_exit > 0.0 {
-            d = p + dir * t_exit - pr.centre.xyz;
+            return p + dir * t_exit - pr.centre.xyz;
         }
+        return dir;
     }
+    let far = pr.centre.w;
+    var front = 0.0;
+    for (var k = 1u; k <= PROBE_MARCH_STEPS; k++) {
+        let s = f32(k) / f32(PROBE_MARCH_STEPS);
+        let t = far * s * s;
+        if behind(pr, p, dir, t) {
+            var back = t;
+            for (var i = 0u; i < PROBE_REFINE_STEPS; i++) {
+                let mid = 0.5 * (front + back);
+                if behind(pr, p, dir, mid) {
+                    back = mid;
+                } else {
+                    front = mid;
+                }
+            }
+            let y = p + dir * back - pr.centre.xyz;
+            if dot(y, y) > 0.0 {
+                return y;
+            }
+            return dir;
+        }
+        front = t;
+    }
+    return dir;
+}
+
+// Probe::sample: the probe's colour for a ray from p along unit dir (bilinear within the face,
+// clamped to it).
+fn probe_sample(pr: ProbeGpu, p: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
+    let d = lookup_direction(pr, p, dir);
     if all(d == vec3<f32>(0.0)) {
         return vec3<f32>(0.0);
     }
-    let face = cube_face_of(d);
-    let proj = project_point(pr.face_vp[face], pr.centre.xyz + d);
-    if !proj.valid {
+    let f = face_uv(d);
+    if !f.valid {
         return vec3<f32>(0.0);
     }
     let n = i32(params.probe_size);
-    let t = proj.uv * f32(n) - vec2<f32>(0.5);
+    let t = f.uv * f32(n) - vec2<f32>(0.5);
     let t0 = floor(t);
     let fx = t.x - t0.x;
     let fy = t.y - t0.y;
     let x0 = i32(t0.x);
     let y0 = i32(t0.y);
-    let layer = i32(pr.info.y + face);
+    let layer = i32(pr.info.y + f.face);
     let c00 = textureLoad(probe_faces, vec2<i32>(clamp(x0, 0, n - 1), clamp(y0, 0, n - 1)), layer, 0).xyz;
     let c10 = textureLoad(probe_faces, vec2<i32>(clamp(x0 + 1, 0, n - 1), clamp(y0, 0, n - 1)), layer, 0).xyz;
     let c01 = textureLoad(probe_faces, vec2<i32>(clamp(x0, 0, n - 1), clamp(y0 + 1, 0, n - 1)), layer, 0).xyz;
