@@ -184,3 +184,18 @@ fn tree_merge_sphere_shadows_match_the_cpu() {
     assert!(assert_fallbacks_match("tree-merge", Mode::Raster, &c, &g, 0.02) > 0);
     assert!(differing(&g.buffers.shadow_fallback, Vec3::ONE) > 50, "no shadows in the GPU's shadow fallback");
 }
+
+/// The pavilion: the pool and the glass walls take their reflections and refractions from
+/// probes marched through their distances; the sun's cascades shadow the floor.
+#[test]
+fn pavilion_fallbacks_match_the_cpu() {
+    let ctx = context();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/pavilion.toml");
+    let mut scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let (w, h) = (96, 54);
+    let (c, g) = render_both(&ctx, &scene, Mode::Raster, w, h);
+    assert!(assert_fallbacks_match("pavilion", Mode::Raster, &c, &g, 0.02) > 0);
+    small_budget(&mut scene, w, h);
+    let (c, g) = render_both(&ctx, &scene, Mode::Hybrid, w, h);
+    assert_fallbacks_match("pavilion", Mode::Hybrid, &c, &g, 0.02);
+}
