@@ -23,7 +23,8 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 use hybrid_core::Stage;
 use hybrid_core::fallback::{
-    FallbackSettings, Probe, ProbePlan, ShadowKind, ShadowView, caster_meshes, plan_light_views, plan_probes, scene_bounds,
+    FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowKind, ShadowMap, ShadowView, caster_meshes, plan_light_views, plan_probes,
+    scene_bounds,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
@@ -35,6 +36,7 @@ use crate::context::{GpuContext, GpuError};
 use crate::heuristic::compute_pipeline;
 use crate::lighting::LightingPass;
 use crate::raster::RasterPass;
+use crate::readback::read_texture_layer_bytes;
 use crate::scene::SceneGpu;
 use crate::shaders;
 use crate::spheres::SpheresGpu;
@@ -122,7 +124,7 @@ pub struct GpuFallbackParams {
 
 /// A Depth32Float texture array: the whole (for sampling) and one view per layer (to render).
 struct DepthArray {
-    _texture: wgpu::Texture,
+    texture: wgpu::Texture,
     array_view: wgpu::TextureView,
     layers: Vec<wgpu::TextureView>,
 }
@@ -152,7 +154,7 @@ impl DepthArray {
                 })
             })
             .collect();
-        Self { _texture: texture, array_view, layers }
+        Self { texture, array_view, layers }
     }
 }
 
@@ -416,6 +418,24 @@ impl FallbackGpu {
             outputs: None,
             probe_renders: 0,
         })
+    }
+
+    /// Every shadow-casting light's maps as last rendered, read back (`--dump`'s
+    /// `shadow_map_<light>.exr`, tests); lights not rendered yet are left out. Waits for the GPU.
+    pub fn shadow_maps(&self, ctx: &GpuContext) -> Result<Vec<LightShadowMaps>, GpuError> {
+        let mut out = Vec::new();
+        for (light, slot) in self.slots.iter().enumerate() {
+            let Some(slot) = slot else { continue };
+            let Some(views) = slot.rendered.iter().copied().collect::<Option<Vec<ShadowView>>>() else { continue };
+            let mut maps = Vec::with_capacity(views.len());
+            for (view, &(array, layer)) in views.into_iter().zip(&slot.places) {
+                let texture = if array == SHADOW_ARRAY_CUBE { &self.cube.texture } else { &self.maps.texture };
+                let depth = bytemuck::pod_collect_to_vec(&read_texture_layer_bytes(ctx, texture, layer)?);
+                maps.push(ShadowMap { view, depth });
+            }
+            out.push(LightShadowMaps { light, kind: slot.kind, maps });
+        }
+        Ok(out)
     }
 
     /// The three fallback targets (shadow, reflection, refraction), once a frame has made them.

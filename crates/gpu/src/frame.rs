@@ -460,6 +460,12 @@ impl<'s> GpuRenderer<'s> {
         Ok((renders, probe_ms))
     }
 
+    /// The shadow maps the raster fallbacks used in the last frame that needed them, read back
+    /// (empty before); waits for the GPU.
+    pub fn shadow_maps(&self) -> Result<Vec<hybrid_core::fallback::LightShadowMaps>, GpuError> {
+        self.fallback_gpu.as_ref().map_or(Ok(Vec::new()), |f| f.shadow_maps(&self.ctx))
+    }
+
     /// Stage 3b's state (maps, probes, render counts), once a frame has needed it.
     pub fn fallback_gpu(&self) -> Option<&FallbackGpu> {
         self.fallback_gpu.as_ref()

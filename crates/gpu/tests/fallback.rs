@@ -199,3 +199,33 @@ fn pavilion_fallbacks_match_the_cpu() {
     let (c, g) = render_both(&ctx, &scene, Mode::Hybrid, w, h);
     assert_fallbacks_match("pavilion", Mode::Hybrid, &c, &g, 0.02);
 }
+
+/// The maps themselves, texel by texel: the same views, the same caster depths but for the
+/// texels on triangle edges (the two rasterizers' coverage rules) and the spheres' disc rims.
+#[test]
+fn shadow_maps_match_the_cpu_texel_by_texel() {
+    let ctx = context();
+    for name in ["demo.toml", "tree-merge.toml"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(name);
+        let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+        let settings = FrameSettings { width: 64, height: 36, mode: Mode::Raster };
+        let mut cpu = CpuRenderer::new(&scene).unwrap();
+        let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap_or_else(|e| panic!("{e}"));
+        cpu.render(&scene.camera, settings, &mut |_| {});
+        gpu.render(&scene.camera, settings, &mut |_| {}).unwrap_or_else(|e| panic!("{e}"));
+        let cpu_maps: Vec<_> = cpu.fallback_cache().expect("fallbacks ran").shadow_maps().iter().flatten().cloned().collect();
+        let gpu_maps = gpu.shadow_maps().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(gpu_maps.len(), cpu_maps.len(), "{name}: lights with maps");
+        for (c, g) in cpu_maps.iter().zip(&gpu_maps) {
+            assert_eq!((g.light, g.kind, g.maps.len()), (c.light, c.kind, c.maps.len()), "{name}");
+            for (k, (cm, gm)) in c.maps.iter().zip(&g.maps).enumerate() {
+                assert_eq!(gm.view, cm.view, "{name} light {} map {k}", c.light);
+                let differ = cm.depth.iter().zip(&gm.depth).filter(|(a, b)| (**a - **b).abs() > 1e-5).count();
+                let covered = cm.depth.iter().filter(|&&d| d > 0.0).count();
+                let share = differ as f64 / cm.depth.len() as f64;
+                eprintln!("{name} light {} map {k}: {covered} covered texels, {differ} differ ({:.4}%)", c.light, share * 100.0);
+                assert!(share < 0.001, "{name} light {} map {k}: {differ} of {} texels differ", c.light, cm.depth.len());
+            }
+        }
+    }
+}
