@@ -80,8 +80,7 @@ pub fn constants() -> String {
     }
     // The cube faces' axes (hybrid_core::fallback::CUBE_FACES: +X, −X, +Y, −Y, +Z, −Z).
     let vec3s = |pick: fn(&(glam::Vec3, glam::Vec3)) -> glam::Vec3| {
-        let v: Vec<String> =
-            fb::CUBE_FACES.iter().map(|f| pick(f)).map(|v| format!("vec3<f32>({:?}, {:?}, {:?})", v.x, v.y, v.z)).collect();
+        let v: Vec<String> = fb::CUBE_FACES.iter().map(pick).map(|v| format!("vec3<f32>({:?}, {:?}, {:?})", v.x, v.y, v.z)).collect();
         v.join(", ")
     };
     out += &format!("const CUBE_FACE_FORWARD: array<vec3<f32>, 6> = array<vec3<f32>, 6>({});\n", vec3s(|f| f.0));
