@@ -548,3 +548,69 @@ fn a_texture_too_large_for_the_gpu_adapter_is_named() {
     let o = hybrid(&["render", scene.to_str().unwrap(), "--quiet", "--backend", "cpu", "--size", "32x18", "-o", out.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
 }
+
+/// `--fallback raster` (the default) reports each object's effect paths and dumps the fallback
+/// buffers and the shadow maps; `--fallback none` has none of them; a bad value is exit 2.
+#[test]
+fn fallback_flag_reports_and_dumps() {
+    let dir = tempfile::tempdir().unwrap();
+    for fallback in ["raster", "none"] {
+        let out = dir.path().join(format!("{fallback}.png"));
+        let report = dir.path().join(format!("{fallback}.json"));
+        let dump = dir.path().join(format!("dump-{fallback}"));
+        let o = hybrid(&[
+            "render",
+            "--backend",
+            "cpu",
+            "--size",
+            "64x36",
+            "--mode",
+            "raster",
+            "--fallback",
+            fallback,
+            "--quiet",
+            "-o",
+            out.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+            "--dump",
+            dump.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        assert_eq!(json["fallback"], fallback, "{json}");
+        assert!(json["timings_ms"]["fallback"].is_number(), "{json}");
+        let effects = json["effects"].as_array().unwrap();
+        assert!(!effects.is_empty(), "{json}");
+        for e in effects {
+            for key in ["id", "name", "shadow", "reflection", "refraction"] {
+                assert!(e.get(key).is_some(), "effects entry lacks `{key}`: {e}");
+            }
+            // Raster mode traces nothing: every effect is the fallback's or none.
+            for key in ["shadow", "reflection", "refraction"] {
+                assert!(e[key] == "raster" || e[key] == "none", "{e}");
+            }
+        }
+        let names = files_in(&dump);
+        let has = |n: &str| names.contains(&n.to_string());
+        // The demo has a sun, a point light and a spot light casting shadows.
+        let maps = ["shadow_map_0.exr", "shadow_map_1.exr", "shadow_map_2.exr"];
+        let buffers = ["shadow_fallback.png", "reflection_fallback.png", "refraction_fallback.png", "shadow_fallback.exr"];
+        if fallback == "raster" {
+            assert!(effects.iter().any(|e| e["shadow"] == "raster"), "{json}");
+            // Three cascades, six cube faces, one spot map.
+            assert_eq!(json["fallback_renders"]["shadow_maps"].as_u64().unwrap(), 3 + 6 + 1, "{json}");
+            for n in buffers.iter().chain(&maps) {
+                assert!(has(n), "dump lacks {n}: {names:?}");
+            }
+        } else {
+            assert!(effects.iter().all(|e| e["shadow"] == "none"), "{json}");
+            for n in buffers.iter().chain(&maps) {
+                assert!(!has(n), "--fallback none dumped {n}");
+            }
+        }
+    }
+    let o = hybrid(&["render", "--fallback", "rays", "-o", dir.path().join("x.png").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--fallback"), "{}", stderr(&o));
+}

@@ -373,3 +373,32 @@ fn rt_hw_in_the_viewer() {
     assert!(err.contains("--rt hw") && err.contains("no hardware ray tracing"), "{err}");
     assert_eq!(err.matches("error:").count(), 1, "{err}");
 }
+
+#[test]
+fn fallback_switches_in_the_viewer_as_render_draws_it() {
+    // `set fallback none` in the viewer gives `render --fallback none`'s image; switching back
+    // to `raster` gives the default render's, and the two differ (raster mode: the fallbacks
+    // are its only shadows).
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scenes().join("demo.toml");
+    let scene = scene.to_str().unwrap();
+    let args = ["--backend", "cpu", "--size", "96x64", "--mode", "raster"];
+    let mut view_args = vec![scene];
+    view_args.extend_from_slice(&args);
+    view(
+        dir.path(),
+        &view_args,
+        "set fallback none\nwait 3\nscreenshot none.png\nset fallback raster\nwait 3\nscreenshot raster.png\nquit\n",
+    );
+    for (shot, fallback) in [("none.png", "none"), ("raster.png", "raster")] {
+        let reference = dir.path().join(format!("render-{fallback}.png"));
+        let mut render_args = vec![scene];
+        render_args.extend_from_slice(&args);
+        render_args.extend_from_slice(&["--fallback", fallback]);
+        render(dir.path(), &render_args, &reference);
+        let flip = mean_flip(&reference, &dir.path().join(shot));
+        assert!(flip <= 0.02, "--fallback {fallback}: mean FLIP {flip} between the viewer's screenshot and hybrid render");
+    }
+    let apart = mean_flip(&dir.path().join("none.png"), &dir.path().join("raster.png"));
+    assert!(apart > 0.02, "the fallbacks must change the raster image (FLIP {apart})");
+}

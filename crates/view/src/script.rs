@@ -259,7 +259,7 @@ mod tests {
     fn parses_settings_as_actions() {
         let p = Path::new("s.txt");
         let ev =
-            parse(p, "set budget 12ms\nset buffer mask\nset light 2 off\nhighlight 3\nhighlight none\nset mode rt-only\npress ctrl+s\n")
+            parse(p, "set budget 12ms\nset buffer mask\nset light 2 off\nhighlight 3\nhighlight none\nset mode rt-only\npress ctrl+s\nset fallback none\nset buffer shadow_fallback\n")
                 .unwrap();
         assert_eq!(
             ev,
@@ -271,9 +271,20 @@ mod tests {
                 Event::Do(Action::Highlight(None)),
                 Event::Do(Action::SetMode(Mode::RtOnly)),
                 Event::Press("ctrl+s".into()),
+                Event::Do(Action::SetFallback(hybrid_core::fallback::Fallback::None)),
+                Event::Do(Action::SetBuffer(BufferKind::ShadowFallback)),
             ]
         );
-        for bad in ["set budget -3", "set buffer nope", "set light 0 on", "set light 1", "set clip maybe", "set speed 3", "set mode fast"] {
+        for bad in [
+            "set budget -3",
+            "set buffer nope",
+            "set light 0 on",
+            "set light 1",
+            "set clip maybe",
+            "set speed 3",
+            "set mode fast",
+            "set fallback rays",
+        ] {
             assert!(parse(p, bad).is_err(), "{bad}");
         }
     }
