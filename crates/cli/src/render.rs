@@ -237,7 +237,7 @@ impl<'s> AnyRenderer<'s> {
     pub fn shadow_maps(&self) -> Result<Vec<hybrid_core::fallback::LightShadowMaps>, CliError> {
         match self {
             AnyRenderer::Cpu(r) => Ok(r.fallback_cache().map(|c| c.shadow_maps().iter().flatten().cloned().collect()).unwrap_or_default()),
-            AnyRenderer::Gpu(_) => Ok(Vec::new()),
+            AnyRenderer::Gpu(r) => r.shadow_maps().map_err(|e| CliError::bad_input(format!("--backend gpu: {e}"))),
         }
     }
 

@@ -40,6 +40,51 @@ fn gpu_backend_renders_the_demo_scene_with_report_and_dump() {
     assert!(json["adapter"]["backend"].is_string(), "{json}");
 }
 
+/// `--backend gpu --mode raster`: the raster fallbacks (issue 18) on the GPU: the fallback
+/// buffers and each light's shadow maps in the dump, and the report's fallback keys.
+#[test]
+fn gpu_backend_dumps_the_raster_fallbacks() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, report, dump) = (dir.path().join("demo.png"), dir.path().join("report.json"), dir.path().join("dump"));
+    let o = hybrid(&[
+        "render",
+        "--backend",
+        "gpu",
+        "--mode",
+        "raster",
+        "--size",
+        "64x36",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+        "--dump",
+        dump.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let names = files_in(&dump);
+    // The demo's three shadow-casting lights: directional (0), point (1), spot (2).
+    for f in [
+        "shadow_fallback.exr",
+        "reflection_fallback.exr",
+        "refraction_fallback.exr",
+        "shadow_map_0.exr",
+        "shadow_map_1.exr",
+        "shadow_map_2.exr",
+    ] {
+        assert!(names.contains(&f.to_string()), "dump lacks {f}: {names:?}");
+    }
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(json["fallback"], "raster", "{json}");
+    // Three cascades, six cube faces, one spot map; the demo's mirror and glass objects' probes.
+    assert_eq!(json["fallback_renders"]["shadow_maps"], 10, "{json}");
+    assert!(json["fallback_renders"]["probes"].as_u64().is_some_and(|p| p > 0), "{json}");
+    let effects = json["effects"].as_array().expect("effects");
+    assert!(!effects.is_empty() && effects.iter().all(|e| e["shadow"] == "raster"), "{json}");
+    assert!(json["gpu_timings_ms"]["fallback"].as_f64().is_some_and(|t| t > 0.0), "{json}");
+}
+
 /// Renders the demo at 64×36 on `backend` with `--report` and `--dump`; checks the files and
 /// returns the report.
 fn render_demo_with_report_and_dump(backend: &str) -> serde_json::Value {

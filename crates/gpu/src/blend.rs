@@ -7,7 +7,7 @@ use hybrid_core::Stage;
 
 use crate::context::GpuContext;
 use crate::heuristic::compute_pipeline;
-use crate::targets::{FINAL_FORMAT, FrameTargets};
+use crate::targets::{FINAL_FORMAT, FrameTargets, Target};
 use crate::timing::StageTimer;
 
 pub(crate) const BLEND_WGSL: &str = include_str!("shaders/blend.wgsl");
@@ -20,6 +20,10 @@ pub struct BlendPass {
     device: wgpu::Device,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
+    /// With the raster fallbacks (`blend_fallback`): group 1 is the object ids and the three
+    /// fallback targets.
+    fallback_pipeline: wgpu::ComputePipeline,
+    fallback_layout: wgpu::BindGroupLayout,
 }
 
 impl BlendPass {
@@ -57,12 +61,50 @@ impl BlendPass {
             ],
         });
         let pipeline = compute_pipeline(device, "blend", BLEND_WGSL, "blend", &layout);
-        Self { device: device.clone(), pipeline, layout }
+        let mut fallback_inputs = vec![wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Uint,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        }];
+        fallback_inputs.extend((1..4).map(|b| input(b, true)));
+        let fallback_layout =
+            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("blend.fallback"), entries: &fallback_inputs });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("blend.fallback"),
+            source: wgpu::ShaderSource::Wgsl(format!("{}\n{BLEND_WGSL}", crate::shaders::constants()).into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("blend.fallback"),
+            bind_group_layouts: &[Some(&layout), Some(&fallback_layout)],
+            immediate_size: 0,
+        });
+        let fallback_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("blend.fallback"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("blend_fallback"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { device: device.clone(), pipeline, layout, fallback_pipeline, fallback_layout }
     }
 
     /// Records the blend pass: eq. 4–6 where the mask is set (≥ 1e-4), the lighting elsewhere,
-    /// sRGB-encoded into `targets.final_image` (alpha 255).
-    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, targets: &FrameTargets, timer: &mut StageTimer) {
+    /// sRGB-encoded into `targets.final_image` (alpha 255). With `fallback` (the shadow,
+    /// reflection and refraction fallback targets), untraced polygon pixels take those terms
+    /// (`hybrid_core::blend::blend_pixel_with_fallback`).
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        targets: &FrameTargets,
+        fallback: Option<&[Target; 3]>,
+        timer: &mut StageTimer,
+    ) {
         let views = [
             &targets.lighting.view,
             &targets.shadow.view,
@@ -81,8 +123,28 @@ impl BlendPass {
             self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("blend"), layout: &self.layout, entries: &entries });
         let mut pass = encoder
             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("blend"), timestamp_writes: timer.compute(Stage::Blend) });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
+        match fallback {
+            Some(fb) => {
+                let views = [&targets.object_id.view, &fb[0].view, &fb[1].view, &fb[2].view];
+                let entries: Vec<wgpu::BindGroupEntry> = views
+                    .iter()
+                    .enumerate()
+                    .map(|(i, view)| wgpu::BindGroupEntry { binding: i as u32, resource: wgpu::BindingResource::TextureView(view) })
+                    .collect();
+                let fallback_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("blend.fallback"),
+                    layout: &self.fallback_layout,
+                    entries: &entries,
+                });
+                pass.set_pipeline(&self.fallback_pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.set_bind_group(1, &fallback_group, &[]);
+            }
+            None => {
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+            }
+        }
         pass.dispatch_workgroups(targets.width.div_ceil(GROUP), targets.height.div_ceil(GROUP), 1);
     }
 }

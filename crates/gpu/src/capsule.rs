@@ -190,6 +190,23 @@ impl GpuCapsule {
         let pixels = targets.width as u64 * targets.height as u64;
         self.rays.store(pixels, Ordering::Relaxed);
         let ids = self.hit_ids(pixels);
+        self.encode_with_ids(encoder, scene, spheres, targets, clip_at_depth, &ids, timer);
+    }
+
+    /// As [`Self::encode`], the hit ids into `ids` (at least 4 bytes per pixel of `targets`),
+    /// leaving the frame's hit ids and ray count alone: the fallbacks' probe faces trace the
+    /// capsule at their own size.
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_with_ids(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &SceneGpu,
+        spheres: &SpheresGpu,
+        targets: &FrameTargets,
+        clip_at_depth: bool,
+        ids: &wgpu::Buffer,
+        timer: &mut StageTimer,
+    ) {
         let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("capsule.targets"),
             layout: &self.trace_layout,

@@ -6,7 +6,8 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use hybrid_core::report::{AdapterReport, FrameReport, RayCounts, StageTimings};
+use hybrid_core::fallback::{Fallback, object_effects};
+use hybrid_core::report::{AdapterReport, FallbackRenders, FrameReport, RayCounts, StageTimings};
 use hybrid_core::stage::{HeuristicStage, MaskChoice};
 use hybrid_core::{Frame, FrameSettings, Mode, PreparedScene, Stage};
 use hybrid_heuristic::{Heuristic, HeuristicReport};
@@ -17,6 +18,7 @@ use crate::blend::BlendPass;
 use crate::bvh::TriangleBvhGpu;
 use crate::capsule::GpuCapsule;
 use crate::context::{GpuContext, GpuError};
+use crate::fallback::FallbackGpu;
 use crate::heuristic::{HeuristicPasses, MaskSelection};
 use crate::lighting::LightingPass;
 use crate::primary::PrimaryPass;
@@ -62,7 +64,11 @@ pub struct GpuRenderer<'s> {
     pub spheres_in_trace: bool,
     /// What pixels the trace stage left out get (`--fallback`, issue 18): shadow maps and probes
     /// (default), or nothing (paper 1 exactly).
-    pub fallback: hybrid_core::fallback::Fallback,
+    pub fallback: Fallback,
+    /// Stage 3b's maps, probes and targets, made on the first frame that needs them.
+    fallback_gpu: Option<FallbackGpu>,
+    /// Whether the last frame wrote the fallback targets (read back with the frame's buffers).
+    fallback_written: bool,
     /// Beyond paper 2: trace the capsule after the raster, with rays clipped at the polygon
     /// depth. Saves the rays that would end behind polygons, at the cost of running the capsule
     /// after (not beside) the raster.
@@ -123,7 +129,9 @@ impl<'s> GpuRenderer<'s> {
             targets: None,
             prepare_ms: start.elapsed().as_secs_f64() * 1e3,
             spheres_in_trace: true,
-            fallback: hybrid_core::fallback::Fallback::default(),
+            fallback: Fallback::default(),
+            fallback_gpu: None,
+            fallback_written: false,
             clip_capsule_at_raster_depth: false,
             trace,
             trace_without_spheres,
@@ -172,7 +180,13 @@ impl<'s> GpuRenderer<'s> {
         let report = self.render_to_targets(camera, settings, on_stage)?;
         let targets = self.targets.as_ref().ok_or_else(|| GpuError::Device("the frame's targets are missing after the frame".into()))?;
         let gbuffer = readback::read_gbuffer(&self.ctx, targets)?;
-        let buffers = readback::read_frame_buffers(&self.ctx, targets)?;
+        let mut buffers = readback::read_frame_buffers(&self.ctx, targets)?;
+        if self.fallback_written
+            && let Some(outputs) = self.fallback_gpu.as_ref().and_then(FallbackGpu::outputs)
+        {
+            [buffers.shadow_fallback, buffers.reflection_fallback, buffers.refraction_fallback] =
+                readback::read_fallback(&self.ctx, outputs)?;
+        }
         let rt_packed = if self.capsule.is_some() { Some(readback::read_packed(&self.ctx, targets)?) } else { None };
         Ok(Frame { settings, gbuffer, buffers, rt_packed, report })
     }
@@ -246,10 +260,9 @@ impl<'s> GpuRenderer<'s> {
         }
         self.lighting.encode(&mut enc, &self.gpu_scene, targets, &mut self.timer);
         on_stage(Stage::Heuristic);
-        let counting = matches!(mode, Mode::Hybrid | Mode::All);
-        if counting {
-            self.heuristic_passes.encode_count(&mut enc, targets, &mut self.timer);
-        }
+        // A per object: the heuristic's input (hybrid, all), and in every mode which objects
+        // were traced and which were not (the report's effects, the fallbacks' probes).
+        self.heuristic_passes.encode_count(&mut enc, targets, &mut self.timer);
         self.ctx.queue.submit([enc.finish()]);
         // The heuristic needs A: wait for stages 0–2's passes (their GPU times are measured by
         // the timer; the host time below is the heuristic's own).
@@ -258,8 +271,12 @@ impl<'s> GpuRenderer<'s> {
         // Stage 2 on the host: A per object → the shared heuristic → the mask pass.
         let heuristic_start = Instant::now();
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame: mask, trace, blend") });
-        let heuristic_report = self.heuristic_stage(&mut enc, targets, camera, mode)?;
+        let (heuristic_report, selected, counts) = self.heuristic_stage(&mut enc, targets, camera, mode)?;
         let heuristic_host_ms = heuristic_start.elapsed().as_secs_f64() * 1e3;
+        // Covered pixels per object that are traced (mask 1: selected) and that are not.
+        let traced: Vec<u64> = counts.iter().zip(&selected).map(|(&c, &on)| if on { c } else { 0 }).collect();
+        let untraced: Vec<u64> = counts.iter().zip(&selected).map(|(&c, &on)| if on { 0 } else { c }).collect();
+        let fallback = self.fallback_applies(mode);
 
         on_stage(Stage::Trace);
         if mode == Mode::Raster {
@@ -272,8 +289,11 @@ impl<'s> GpuRenderer<'s> {
                 &mut self.timer,
             );
         }
+        on_stage(Stage::Fallback);
+        let (fallback_renders, probe_ms) = self.fallback_stage(&mut enc, targets, camera, fallback, &untraced)?;
         on_stage(Stage::Blend);
-        self.blend.encode(&mut enc, targets, &mut self.timer);
+        let fallback_targets = if self.fallback_written { self.fallback_gpu.as_ref().and_then(FallbackGpu::outputs) } else { None };
+        self.blend.encode(&mut enc, targets, fallback_targets, &mut self.timer);
         self.timer.resolve(&mut enc);
         let second = Instant::now();
         self.ctx.queue.submit([enc.finish()]);
@@ -296,6 +316,9 @@ impl<'s> GpuRenderer<'s> {
         let gpu_timings = gpu_timings.map(|g| StageTimings { build_as: self.build_as_ms, ..g });
         let mut timings = gpu_timings.unwrap_or(StageTimings { trace: second_ms, ..Default::default() });
         timings.heuristic += heuristic_host_ms;
+        // The probes' faces run in their own submissions before the frame's second one: their
+        // host time counts with the stage.
+        timings.fallback += probe_ms;
         self.heuristic.record_trace(mode, heuristic_report.as_ref(), timings[Stage::Trace]);
         let capsule = self.capsule.as_ref().map(|c| {
             let mut r = c.report();
@@ -313,9 +336,9 @@ impl<'s> GpuRenderer<'s> {
             objects: self.scene.objects.len() as u64,
             heuristic: heuristic_report,
             capsule,
-            fallback: hybrid_core::fallback::Fallback::None,
-            effects: Vec::new(),
-            fallback_renders: Default::default(),
+            fallback: self.fallback,
+            effects: object_effects(self.scene, &traced, &untraced, fallback),
+            fallback_renders,
             gpu_timings_ms: gpu_timings,
             adapter: Some(AdapterReport {
                 name: s.name.clone(),
@@ -349,23 +372,103 @@ impl<'s> GpuRenderer<'s> {
 
     /// Stage 2: the shared heuristic stage on A per object read back from the count pass (modes
     /// hybrid and all), then the mask pass. rt-only masks every covered pixel; raster masks nothing.
+    /// Also returns, per object, whether its pixels are traced (mask 1) and A (read back in every
+    /// mode).
+    #[allow(clippy::type_complexity)]
     fn heuristic_stage(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
         targets: &FrameTargets,
         camera: &Camera,
         mode: Mode,
-    ) -> Result<Option<HeuristicReport>, GpuError> {
+    ) -> Result<(Option<HeuristicReport>, Vec<bool>, Vec<u64>), GpuError> {
         let ctx = &self.ctx;
         let passes = &self.heuristic_passes;
-        let choice = self.heuristic.choose(&self.prepared, camera, (targets.width, targets.height), mode, || passes.read_counts(ctx))?;
-        let mask = match &choice {
-            MaskChoice::Nothing => MaskSelection::Nothing,
-            MaskChoice::AllCovered => MaskSelection::AllCovered,
-            MaskChoice::Objects(selection) => MaskSelection::Objects(&selection.selected),
+        let mut counted = None;
+        let choice = self.heuristic.choose(&self.prepared, camera, (targets.width, targets.height), mode, || {
+            let counts = passes.read_counts(ctx)?;
+            counted = Some(counts.clone());
+            Ok::<_, GpuError>(counts)
+        })?;
+        let counts = match counted {
+            Some(c) => c,
+            None => passes.read_counts(ctx)?,
+        };
+        let n = counts.len();
+        let (mask, selected) = match &choice {
+            MaskChoice::Nothing => (MaskSelection::Nothing, vec![false; n]),
+            MaskChoice::AllCovered => (MaskSelection::AllCovered, vec![true; n]),
+            MaskChoice::Objects(selection) => {
+                let mut on = selection.selected.clone();
+                on.resize(n, false);
+                (MaskSelection::Objects(&selection.selected), on)
+            }
         };
         self.heuristic_passes.encode_mask(ctx, enc, targets, mask, &mut self.timer);
-        Ok(choice.into_report())
+        Ok((choice.into_report(), selected, counts))
+    }
+
+    /// The fallback that applies in `mode` (`rt-only` traces every pixel: none).
+    fn fallback_applies(&self, mode: Mode) -> Fallback {
+        if mode == Mode::RtOnly { Fallback::None } else { self.fallback }
+    }
+
+    /// Stage 3b (issue 18): the probes of objects with untraced pixels (`untraced`, per object)
+    /// that have none yet (their own submissions, now), the shadow maps whose views changed and
+    /// the lookups into the fallback targets (recorded into `enc`). Nothing when `fallback` is
+    /// none. Returns what was rendered and the probes' host ms.
+    fn fallback_stage(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        targets: &FrameTargets,
+        camera: &Camera,
+        fallback: Fallback,
+        untraced: &[u64],
+    ) -> Result<(FallbackRenders, f64), GpuError> {
+        self.fallback_written = false;
+        let mut renders = FallbackRenders::default();
+        if fallback == Fallback::None {
+            return Ok((renders, 0.0));
+        }
+        if self.fallback_gpu.is_none() {
+            let spheres_cast = self.spheres_in_trace && self.capsule.is_some();
+            self.fallback_gpu = Some(FallbackGpu::new(&self.ctx, &self.gpu_scene, &self.prepared, &self.spheres, spheres_cast)?);
+        }
+        let Some(fb) = self.fallback_gpu.as_mut() else { return Ok((renders, 0.0)) };
+        fb.ensure_outputs(targets.width, targets.height);
+        let needed: Vec<bool> = untraced.iter().map(|&u| u > 0).collect();
+        let mut to_render = Vec::new();
+        let mut probe_ms = 0.0;
+        if needed.iter().any(|&x| x) {
+            let start = Instant::now();
+            // As the CPU: the spheres appear in the probes when they take part in the trace stage.
+            let capsule = self.capsule.as_ref().filter(|_| self.spheres_in_trace).map(|c| (c, &self.spheres));
+            renders.probes = fb.render_probes(&self.ctx, &self.gpu_scene, self.scene, &self.raster, &self.lighting, capsule, &needed);
+            if renders.probes > 0 {
+                // The probes' faces wrote their cameras into the frame uniforms.
+                self.gpu_scene.write_uniforms(&self.ctx, camera, targets.width, targets.height, &self.scene.environment);
+            }
+            probe_ms = start.elapsed().as_secs_f64() * 1e3;
+            let aspect = targets.width as f32 / targets.height.max(1) as f32;
+            to_render = fb.update_views(&self.ctx, self.scene, camera, aspect);
+            renders.shadow_maps = to_render.len() as u64;
+        }
+        // As the CPU: the spheres cast into the maps when they take part in the trace stage.
+        let splat = self.spheres_in_trace && self.capsule.is_some();
+        fb.encode(enc, &self.gpu_scene, targets, &to_render, splat, &mut self.timer);
+        self.fallback_written = true;
+        Ok((renders, probe_ms))
+    }
+
+    /// The shadow maps the raster fallbacks used in the last frame that needed them, read back
+    /// (empty before); waits for the GPU.
+    pub fn shadow_maps(&self) -> Result<Vec<hybrid_core::fallback::LightShadowMaps>, GpuError> {
+        self.fallback_gpu.as_ref().map_or(Ok(Vec::new()), |f| f.shadow_maps(&self.ctx))
+    }
+
+    /// Stage 3b's state (maps, probes, render counts), once a frame has needed it.
+    pub fn fallback_gpu(&self) -> Option<&FallbackGpu> {
+        self.fallback_gpu.as_ref()
     }
 }
 

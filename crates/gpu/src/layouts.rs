@@ -27,8 +27,6 @@ macro_rules! layout {
 fn uploaded_structs_match_their_wgsl_layouts() {
     let source = with_common(&format!("{BVH_WGSL}\n{SPHERES_WGSL}\n{TRACE_WGSL}"));
     let module = naga::front::wgsl::parse_str(&source).expect("the trace pass's WGSL parses");
-    let mut layouter = naga::proc::Layouter::default();
-    layouter.update(module.to_ctx()).expect("naga lays the types out");
     let layouts = [
         layout!(
             FrameUniforms,
@@ -66,6 +64,42 @@ fn uploaded_structs_match_their_wgsl_layouts() {
         layout!(GpuSphere, "Sphere", [center, radius, albedo, cloud]),
         layout!(TraceParams, "TraceParams", [ray_bias, importance_cutoff, max_depth, _pad]),
     ];
+    check(&module, layouts);
+}
+
+#[test]
+fn fallback_structs_match_their_wgsl_layouts() {
+    use crate::fallback::{FALLBACK_WGSL, GpuFallbackParams, GpuProbe, GpuShadowLight, GpuShadowView, SHADOW_DEPTH_WGSL, SHADOW_VIEW_WGSL};
+    let source = with_common(&format!("{SHADOW_VIEW_WGSL}\n{FALLBACK_WGSL}"));
+    let module = naga::front::wgsl::parse_str(&source).expect("the fallback pass's WGSL parses");
+    check(
+        &module,
+        [
+            layout!(GpuShadowView, "ShadowViewGpu", [view_proj, near, far, texel_world, split_far, size, orthographic, array_index, layer]),
+            layout!(GpuShadowLight, "ShadowLightGpu", [kind, first_view, view_count, _pad]),
+            layout!(GpuProbe, "ProbeGpu", [centre, box_min, box_max, info]),
+            layout!(GpuFallbackParams, "FallbackParams", [pcf_radius, probe_size, _pad0, _pad1]),
+        ],
+    );
+    let source = format!("{}\n{}", crate::shaders::constants(), crate::fallback::PROBE_DISTANCE_WGSL);
+    let module = naga::front::wgsl::parse_str(&source).expect("the probe distance pass's WGSL parses");
+    check(&module, [layout!(crate::fallback::GpuProbeFace, "ProbeFace", [centre, base])]);
+    // The shadow-map pass reads the views and the spheres with its own copy of `Sphere`.
+    let source = with_common(&format!("{SHADOW_VIEW_WGSL}\n{SHADOW_DEPTH_WGSL}"));
+    let module = naga::front::wgsl::parse_str(&source).expect("the shadow-map pass's WGSL parses");
+    check(
+        &module,
+        [
+            layout!(GpuShadowView, "ShadowViewGpu", [view_proj, near, far, texel_world, split_far, size, orthographic, array_index, layer]),
+            layout!(GpuSphere, "Sphere", [center, radius, albedo, cloud]),
+        ],
+    );
+}
+
+/// Each Rust layout against the WGSL struct of its name in `module`.
+fn check(module: &naga::Module, layouts: impl IntoIterator<Item = Layout>) {
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).expect("naga lays the types out");
     for want in layouts {
         let (handle, ty) = module
             .types

@@ -8,6 +8,7 @@ pub mod blend;
 pub mod bvh;
 pub mod capsule;
 pub mod context;
+pub mod fallback;
 pub mod frame;
 pub mod heuristic;
 #[cfg(test)]

@@ -58,6 +58,27 @@ impl RasterPass {
     }
 }
 
+impl RasterPass {
+    /// As [`Self::encode`], drawing only the triangles in `ranges` (indices into group 0's
+    /// triangles): the fallbacks' probe faces leave their own object out.
+    pub fn encode_triangles(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &SceneGpu,
+        targets: &FrameTargets,
+        clear: bool,
+        ranges: &[std::ops::Range<u32>],
+        timer: &mut StageTimer,
+    ) {
+        let mut pass = begin_gbuffer_pass(encoder, targets, clear, "raster (triangle ranges)", timer.render(Stage::Raster));
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &scene.bind_group, &[]);
+        for r in ranges {
+            pass.draw(3 * r.start..3 * r.end, 0..1);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,6 +10,11 @@ use crate::targets::{FrameTargets, Target};
 
 /// The texture's texels, rows tightly packed (row 0 at the top), as raw bytes.
 pub fn read_texture_bytes(ctx: &GpuContext, texture: &wgpu::Texture) -> Result<Vec<u8>, GpuError> {
+    read_texture_layer_bytes(ctx, texture, 0)
+}
+
+/// As [`read_texture_bytes`], array layer `layer` of the texture.
+pub fn read_texture_layer_bytes(ctx: &GpuContext, texture: &wgpu::Texture, layer: u32) -> Result<Vec<u8>, GpuError> {
     let (w, h) = (texture.width(), texture.height());
     let format = texture.format();
     let aspect = if format.is_depth_stencil_format() { wgpu::TextureAspect::DepthOnly } else { wgpu::TextureAspect::All };
@@ -24,7 +29,7 @@ pub fn read_texture_bytes(ctx: &GpuContext, texture: &wgpu::Texture) -> Result<V
     });
     let mut encoder = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
     encoder.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect },
+        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d { x: 0, y: 0, z: layer }, aspect },
         wgpu::TexelCopyBufferInfo {
             buffer: &buffer,
             layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(h) },
@@ -127,6 +132,11 @@ pub fn read_frame_buffers(ctx: &GpuContext, t: &FrameTargets) -> Result<FrameBuf
         refraction_fallback: Vec::new(),
         final_srgb: read_rgba8(ctx, &t.final_image)?,
     })
+}
+
+/// The three fallback targets (shadow, reflection, refraction) of stage 3b.
+pub fn read_fallback(ctx: &GpuContext, t: &[Target; 3]) -> Result<[Vec<Vec3>; 3], GpuError> {
+    Ok([rgb(read_rgba_f32(ctx, &t[0])?), rgb(read_rgba_f32(ctx, &t[1])?), rgb(read_rgba_f32(ctx, &t[2])?)])
 }
 
 /// The capsule's packed RGBA16UI frame.

@@ -25,7 +25,7 @@ pub fn with_common(pass_source: &str) -> String {
 /// The WGSL header of every constant that Rust and WGSL share, generated from the Rust
 /// definitions so the two cannot drift: object ids, the shadow class that is evaluated at the
 /// hit, the blend's mask threshold, mesh flags, light and sky kinds, stack sizes, the count
-/// pass's span.
+/// pass's span, the fallbacks' map kinds and shadow-map biases.
 pub fn constants() -> String {
     use crate::scene::*;
     let u32s = [
@@ -46,10 +46,26 @@ pub fn constants() -> String {
         ("RT_MASK_SHADOW_CASTERS", crate::accel::RT_MASK_SHADOW_CASTERS),
         ("RT_MASK_SPHERES", crate::accel::RT_MASK_SPHERES),
         ("RT_MASK_TRIANGLES", crate::accel::RT_MASK_TRIANGLES),
+        ("SHADOW_NONE", crate::fallback::SHADOW_NONE),
+        ("SHADOW_DIRECTIONAL", crate::fallback::SHADOW_DIRECTIONAL),
+        ("SHADOW_SPOT", crate::fallback::SHADOW_SPOT),
+        ("SHADOW_POINT", crate::fallback::SHADOW_POINT),
+        ("SHADOW_ARRAY_MAPS", crate::fallback::SHADOW_ARRAY_MAPS),
+        ("SHADOW_ARRAY_CUBE", crate::fallback::SHADOW_ARRAY_CUBE),
+        ("PROBE_MARCH_STEPS", hybrid_core::fallback::PROBE_MARCH_STEPS),
+        ("PROBE_REFINE_STEPS", hybrid_core::fallback::PROBE_REFINE_STEPS),
     ];
     // The sky kind is an i32 in WGSL (compared with a signed uniform field).
     let i32s = [("SKY_COLOR", SKY_COLOR), ("SKY_GRADIENT", SKY_GRADIENT), ("SKY_CUBE", SKY_CUBE)];
-    let f32s = [("SHADOW_EVALUATE", hybrid_core::prepare::SHADOW_EVALUATE), ("MASK_EPSILON", hybrid_core::blend::MASK_EPSILON)];
+    use hybrid_core::fallback as fb;
+    let f32s = [
+        ("SHADOW_EVALUATE", hybrid_core::prepare::SHADOW_EVALUATE),
+        ("MASK_EPSILON", hybrid_core::blend::MASK_EPSILON),
+        ("SHADOW_BIAS_TEXELS", fb::SHADOW_BIAS_TEXELS),
+        ("SHADOW_SLOPE_BIAS_TEXELS", fb::SHADOW_SLOPE_BIAS_TEXELS),
+        ("SHADOW_NORMAL_OFFSET_TEXELS", fb::SHADOW_NORMAL_OFFSET_TEXELS),
+        ("SHADOW_MAX_SLOPE", fb::SHADOW_MAX_SLOPE),
+    ];
     let mut out = String::from("// Generated from the Rust definitions (hybrid_gpu::shaders::constants).\n");
     for (name, v) in u32s {
         out += &format!("const {name}: u32 = {v}u;\n");
@@ -62,6 +78,13 @@ pub fn constants() -> String {
         // an exponent, so WGSL reads it as a float).
         out += &format!("const {name}: f32 = {v:?};\n");
     }
+    // The cube faces' axes (hybrid_core::fallback::CUBE_FACES: +X, −X, +Y, −Y, +Z, −Z).
+    let vec3s = |pick: fn(&(glam::Vec3, glam::Vec3)) -> glam::Vec3| {
+        let v: Vec<String> = fb::CUBE_FACES.iter().map(pick).map(|v| format!("vec3<f32>({:?}, {:?}, {:?})", v.x, v.y, v.z)).collect();
+        v.join(", ")
+    };
+    out += &format!("const CUBE_FACE_FORWARD: array<vec3<f32>, 6> = array<vec3<f32>, 6>({});\n", vec3s(|f| f.0));
+    out += &format!("const CUBE_FACE_UP: array<vec3<f32>, 6> = array<vec3<f32>, 6>({});\n", vec3s(|f| f.1));
     out
 }
 
@@ -133,6 +156,10 @@ fn probe() {
             ("trace.wgsl", crate::trace::TRACE_WGSL),
             ("rq.wgsl + bvh_rq.wgsl", crate::accel::RQ_WGSL),
             ("spheres_rq.wgsl", crate::spheres::SPHERES_RQ_WGSL),
+            ("shadow_depth.wgsl", crate::fallback::SHADOW_DEPTH_WGSL),
+            ("fallback.wgsl", crate::fallback::FALLBACK_WGSL),
+            ("shadow_view.wgsl", crate::fallback::SHADOW_VIEW_WGSL),
+            ("probe_distance.wgsl", crate::fallback::PROBE_DISTANCE_WGSL),
         ];
         let names: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("const ")).map(|l| l.split(':').next().unwrap()).collect();
         assert!(names.len() >= 18, "{header}");

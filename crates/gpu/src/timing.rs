@@ -55,6 +55,12 @@ impl StageTimer {
         }
     }
 
+    /// A timer that times nothing (passes recorded outside the frame's timing, e.g. the
+    /// fallbacks' probe faces, which run in their own submissions).
+    pub fn disabled() -> Self {
+        Self { query_set: None, resolve: None, readback: None, period_ns: 1.0, passes: Vec::new() }
+    }
+
     /// Forgets the previous frame's passes (call at the start of each frame).
     pub fn begin_frame(&mut self) {
         self.passes.clear();

@@ -174,7 +174,7 @@ fn gpu_blend(ctx: &GpuContext, g: &GBuffer, b: &FrameBuffers) -> (Vec<[u8; 4]>, 
     let mut timer = StageTimer::new(ctx);
     timer.begin_frame();
     let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    pass.encode(&mut encoder, &targets, &mut timer);
+    pass.encode(&mut encoder, &targets, None, &mut timer);
     timer.resolve(&mut encoder);
     ctx.queue.submit([encoder.finish()]);
     match timer.read(ctx).expect("timestamps read back") {

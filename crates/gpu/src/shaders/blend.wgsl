@@ -65,3 +65,43 @@ fn blend(@builtin(global_invocation_id) gid: vec3<u32>) {
     );
     textureStore(final_image, p, vec4<f32>(encode_channel(c.x), encode_channel(c.y), encode_channel(c.z), 1.0));
 }
+
+// With the raster fallbacks (issue 18; hybrid_core::blend::blend_pixel_with_fallback): a polygon
+// pixel the trace stage left out (mask < MASK_EPSILON) takes the fallback terms through the same
+// equations with mask 1. Only the pipeline of this entry point binds group 1.
+@group(1) @binding(0) var object_id: texture_2d<u32>;
+@group(1) @binding(1) var shadow_fallback: texture_2d<f32>;
+@group(1) @binding(2) var reflection_fallback: texture_2d<f32>;
+@group(1) @binding(3) var refraction_fallback: texture_2d<f32>;
+
+@compute @workgroup_size(8, 8, 1)
+fn blend_fallback(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let size = textureDimensions(final_image);
+    if gid.x >= size.x || gid.y >= size.y {
+        return;
+    }
+    let p = gid.xy;
+    let id = textureLoad(object_id, p, 0).x;
+    let mask_value = textureLoad(mask, p, 0).x;
+    var c: vec3<f32>;
+    if mask_value < MASK_EPSILON && id != NO_OBJECT && id != RT_SCENE_OBJECT {
+        c = blend_pixel(
+            textureLoad(lighting, p, 0).xyz,
+            textureLoad(shadow_fallback, p, 0).xyz,
+            textureLoad(reflection_fallback, p, 0).xyz,
+            textureLoad(refraction_fallback, p, 0).xyz,
+            textureLoad(optical, p, 0).xyz,
+            1.0,
+        );
+    } else {
+        c = blend_pixel(
+            textureLoad(lighting, p, 0).xyz,
+            textureLoad(shadow, p, 0).xyz,
+            textureLoad(reflection, p, 0).xyz,
+            textureLoad(refraction, p, 0).xyz,
+            textureLoad(optical, p, 0).xyz,
+            mask_value,
+        );
+    }
+    textureStore(final_image, p, vec4<f32>(encode_channel(c.x), encode_channel(c.y), encode_channel(c.z), 1.0));
+}
