@@ -391,7 +391,8 @@ mod tests {
         let cols = FRAMES_CSV_HEADER.split(',').count();
         assert_eq!(lines[1].split(',').count(), cols);
         assert!(lines[1].starts_with("path,hybrid,0,0,2.000,"));
-        assert!(lines[1].ends_with(",0.01230"));
+        // FLIP, then the fallback stage's milliseconds (the last column).
+        assert!(lines[1].ends_with(",0.01230,0.000"), "{}", lines[1]);
     }
 
     #[test]
