@@ -239,6 +239,8 @@ pub struct FallbackGpu {
     pub shadow_map_renders: Vec<u64>,
     /// Probes rendered since this was made.
     pub probe_renders: u64,
+    /// See-through layers rendered since this was made (one per frame that needed it).
+    pub see_through_renders: u64,
 }
 
 impl FallbackGpu {
@@ -447,6 +449,7 @@ impl FallbackGpu {
             see_through_targets: FrameTargets::new(device, 1, 1),
             outputs: None,
             probe_renders: 0,
+            see_through_renders: 0,
         })
     }
 
@@ -466,6 +469,12 @@ impl FallbackGpu {
             out.push(LightShadowMaps { light, kind: slot.kind, maps });
         }
         Ok(out)
+    }
+
+    /// Per object: whether its refraction looks through the see-through layer (planar
+    /// refractive objects, `hybrid_core::fallback::see_through_objects`).
+    pub fn see_through_objects(&self) -> &[bool] {
+        &self.see_through_objects
     }
 
     /// The three fallback targets (shadow, reflection, refraction), once a frame has made them.
@@ -654,6 +663,7 @@ impl FallbackGpu {
             raster.encode_triangles(&mut enc, scene_gpu, targets, true, &self.see_through_ranges, &mut timer);
             lighting.encode(&mut enc, scene_gpu, targets, &mut timer);
             ctx.queue.submit([enc.finish()]);
+            self.see_through_renders += 1;
             self.params_data.see_width = w;
             self.params_data.see_height = h;
             self.params_data.see_view_proj = view.view_projection(w as f32 / h.max(1) as f32).to_cols_array_2d();
