@@ -5,8 +5,12 @@
 //! point-light cube face); each light's views are cached as the CPU caches them (a layer is
 //! re-rendered only when its `ShadowView` changed). Probes are rendered with this backend's own
 //! raster and deferred-lighting passes, six faces per reflective or refractive object, once,
-//! when the object first has untraced pixels. One compute pass (`shaders/fallback.wgsl`, the
-//! twin of `FallbackScene::pixel`) then writes the three fallback targets.
+//! when the object first has untraced pixels. Planar refractive objects refract through the
+//! see-through layer (`SeeThrough`): the frame's view widened, rendered by the same raster and
+//! lighting passes without them into its own targets, every frame one has untraced pixels.
+//! Probe faces and that layer sample textures at level 0 (`RasterPass::encode_triangles`). One
+//! compute pass (`shaders/fallback.wgsl`, the twin of `FallbackScene::pixel`) then writes the
+//! three fallback targets.
 //!
 //! Inputs: the G-buffer targets, the mask, the camera, the per-object pixel counts and selection
 //! (which objects need the fallbacks). Outputs: `shadow`, `reflection`, `refraction` fallback
@@ -446,7 +450,7 @@ impl FallbackGpu {
             mesh_triangles,
             see_through_objects,
             see_through_ranges,
-            see_through_targets: FrameTargets::new(device, 1, 1),
+            see_through_targets: FrameTargets::raster_layer(device, 1, 1),
             outputs: None,
             probe_renders: 0,
             see_through_renders: 0,
@@ -654,7 +658,7 @@ impl FallbackGpu {
         if need {
             let (view, w, h) = see_through_view(camera, width, height);
             if (self.see_through_targets.width, self.see_through_targets.height) != (w, h) {
-                self.see_through_targets = FrameTargets::new(&ctx.device, w, h);
+                self.see_through_targets = FrameTargets::raster_layer(&ctx.device, w, h);
             }
             let targets = &self.see_through_targets;
             scene_gpu.write_uniforms(ctx, &view, w, h, &scene.environment);
