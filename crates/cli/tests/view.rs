@@ -374,15 +374,15 @@ fn rt_hw_in_the_viewer() {
     assert_eq!(err.matches("error:").count(), 1, "{err}");
 }
 
-#[test]
-fn fallback_switches_in_the_viewer_as_render_draws_it() {
-    // `set fallback none` in the viewer gives `render --fallback none`'s image; switching back
-    // to `raster` gives the default render's, and the two differ (raster mode: the fallbacks
-    // are its only shadows).
+/// `set fallback none` in the viewer gives `render --fallback none`'s image; switching back to
+/// `raster` gives the default render's, and the two differ (raster mode: the fallbacks are its
+/// only shadows). On the GPU the viewer's frames stay on the GPU (render_to_targets): the fallback
+/// targets and the blend's fallback entry point are used there too.
+fn fallback_switches_in_the_viewer_as_render_draws_it(backend: &str) {
     let dir = tempfile::tempdir().unwrap();
     let scene = scenes().join("demo.toml");
     let scene = scene.to_str().unwrap();
-    let args = ["--backend", "cpu", "--size", "96x64", "--mode", "raster"];
+    let args = ["--backend", backend, "--size", "96x64", "--mode", "raster"];
     let mut view_args = vec![scene];
     view_args.extend_from_slice(&args);
     view(
@@ -397,36 +397,18 @@ fn fallback_switches_in_the_viewer_as_render_draws_it() {
         render_args.extend_from_slice(&["--fallback", fallback]);
         render(dir.path(), &render_args, &reference);
         let flip = mean_flip(&reference, &dir.path().join(shot));
-        assert!(flip <= 0.02, "--fallback {fallback}: mean FLIP {flip} between the viewer's screenshot and hybrid render");
+        assert!(flip <= 0.02, "{backend} --fallback {fallback}: mean FLIP {flip} between the viewer's screenshot and hybrid render");
     }
     let apart = mean_flip(&dir.path().join("none.png"), &dir.path().join("raster.png"));
-    assert!(apart > 0.02, "the fallbacks must change the raster image (FLIP {apart})");
+    assert!(apart > 0.02, "{backend}: the fallbacks must change the raster image (FLIP {apart})");
 }
 
 #[test]
-fn gpu_fallback_switches_in_the_viewer_as_render_draws_it() {
-    // As above on the GPU backend, whose viewer frames stay on the GPU (render_to_targets): the
-    // fallback targets and the blend's fallback entry point are used there too.
-    let dir = tempfile::tempdir().unwrap();
-    let scene = scenes().join("demo.toml");
-    let scene = scene.to_str().unwrap();
-    let args = ["--backend", "gpu", "--size", "96x64", "--mode", "raster"];
-    let mut view_args = vec![scene];
-    view_args.extend_from_slice(&args);
-    view(
-        dir.path(),
-        &view_args,
-        "set fallback none\nwait 3\nscreenshot none.png\nset fallback raster\nwait 3\nscreenshot raster.png\nquit\n",
-    );
-    for (shot, fallback) in [("none.png", "none"), ("raster.png", "raster")] {
-        let reference = dir.path().join(format!("render-{fallback}.png"));
-        let mut render_args = vec![scene];
-        render_args.extend_from_slice(&args);
-        render_args.extend_from_slice(&["--fallback", fallback]);
-        render(dir.path(), &render_args, &reference);
-        let flip = mean_flip(&reference, &dir.path().join(shot));
-        assert!(flip <= 0.02, "gpu --fallback {fallback}: mean FLIP {flip} between the viewer's screenshot and hybrid render");
-    }
-    let apart = mean_flip(&dir.path().join("none.png"), &dir.path().join("raster.png"));
-    assert!(apart > 0.02, "the fallbacks must change the GPU's raster image (FLIP {apart})");
+fn cpu_fallback_switches_in_the_viewer() {
+    fallback_switches_in_the_viewer_as_render_draws_it("cpu");
+}
+
+#[test]
+fn gpu_fallback_switches_in_the_viewer() {
+    fallback_switches_in_the_viewer_as_render_draws_it("gpu");
 }

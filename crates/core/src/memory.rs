@@ -154,7 +154,44 @@ pub fn estimate(scene: &Scene, backend: Backend, width: u32, height: u32, extra_
         }
     };
     let point_clouds = !scene.point_clouds.is_empty();
+    let prepared = prepared.saturating_add(fallback_bytes(scene, backend, width, height));
     Estimate { scene: held, prepared, frame: frame_bytes(backend, width, height, point_clouds, extra_per_pixel), base: base_bytes(backend) }
+}
+
+/// The raster fallbacks' share (issue 18, counted with the prepared scene; an upper bound: it
+/// assumes `--fallback raster` and every map and probe rendered): the three fallback buffers
+/// per pixel (GPU: their targets too), each shadow-casting light's maps (directional: its
+/// cascades; spot: one map; point: six cube faces; 4 bytes a texel), each reflective or
+/// refractive object's probe (colour and distance per texel), and with planar refractive objects
+/// the see-through layer (a G-buffer and lighting over the widened view).
+pub fn fallback_bytes(scene: &Scene, backend: Backend, width: u32, height: u32) -> u64 {
+    use crate::fallback::{FallbackSettings, SEE_THROUGH_GUARD};
+    let s = FallbackSettings::default();
+    let pixels = width as u64 * height as u64;
+    let per_pixel = 3 * size_of::<Vec3>() as u64 + if backend == Backend::Gpu { 3 * 8 } else { 0 };
+    let map = |n: u32| n as u64 * n as u64 * 4;
+    let l = &scene.lights;
+    let maps = l.directional.iter().filter(|d| d.casts_shadows).count() as u64 * s.cascades as u64 * map(s.shadow_map_size)
+        + l.spot.iter().filter(|d| d.casts_shadows).count() as u64 * map(s.shadow_map_size)
+        + l.point.iter().filter(|d| d.casts_shadows).count() as u64 * 6 * map(s.cube_shadow_size);
+    let probe = 6 * s.probe_size as u64 * s.probe_size as u64 * (size_of::<Vec3>() as u64 + 4);
+    let probes =
+        scene.objects.iter().filter(|o| o.is_reflective(&scene.materials) || o.is_refractive(&scene.materials)).count() as u64 * probe;
+    // Planar refractive objects (`fallback::see_through_objects`, from the objects' bounds).
+    let planar = scene.objects.iter().any(|o| {
+        o.is_refractive(&scene.materials)
+            && o.world_bounds().is_some_and(|b| {
+                let e = b.max - b.min;
+                e.min_element() <= crate::fallback::PLANAR_THICKNESS * e.max_element()
+            })
+    });
+    let see_through = if planar {
+        let layer_pixels = (pixels as f64 * (SEE_THROUGH_GUARD * SEE_THROUGH_GUARD) as f64).ceil() as u64;
+        layer_pixels.saturating_mul(GBUFFER_BYTES_PER_PIXEL + size_of::<Vec3>() as u64)
+    } else {
+        0
+    };
+    pixels.saturating_mul(per_pixel).saturating_add(maps).saturating_add(probes).saturating_add(see_through)
 }
 
 /// The fixed overhead on `backend`.
@@ -226,7 +263,11 @@ mod tests {
         assert_eq!(e.frame, 64 * 36 * 160);
         assert_eq!(e.scene, hybrid_scene::memory::scene_bytes(&scene));
         let triangles: u64 = scene.objects.iter().flat_map(|o| &o.meshes).map(|m| m.indices.len() as u64).sum();
-        assert!(e.prepared >= triangles * CPU_PREPARE_BYTES_PER_TRIANGLE);
+        assert!(e.prepared >= triangles * CPU_PREPARE_BYTES_PER_TRIANGLE + fallback_bytes(&scene, Backend::Cpu, 64, 36));
+        // The demo's fallbacks: a sun (3 cascades of 1024²), a point light (6 faces of 512²) and a
+        // spot light (1024²) casting shadows, 4 bytes a texel, and the 36 bytes a pixel of the
+        // three fallback buffers; its probes and see-through layer on top.
+        assert!(fallback_bytes(&scene, Backend::Cpu, 64, 36) >= (3 << 22) + (6 << 20) + (1 << 22) + 64 * 36 * 36);
         assert_eq!(e.total(), e.scene + e.prepared + e.frame + CPU_BASE_BYTES);
         assert_eq!(frame_only(64, 36, 0).total(), 64 * 36 * 160 + CPU_BASE_BYTES);
         assert!(e.check(&MemoryLimit::explicit(e.total())).is_ok());
@@ -234,7 +275,8 @@ mod tests {
         assert!(err.contains("above the limit of") && err.contains("--max-memory"), "{err}");
         let huge = estimate(&scene, Backend::Cpu, 16384, 16384, 0);
         let err = huge.check(&MemoryLimit::explicit(8 << 30)).unwrap_err();
-        assert!(err.contains("frame 40.00 GiB") && err.contains("8.00 GiB (--max-memory)") && err.contains("--max-memory 41GiB"), "{err}");
+        // Frame 40 GiB, the fallback buffers 9 GiB (36 bytes a pixel) with the prepared scene.
+        assert!(err.contains("frame 40.00 GiB") && err.contains("8.00 GiB (--max-memory)") && err.contains("--max-memory 50GiB"), "{err}");
         let err = frame_only(16384, 16384, 0).check(&MemoryLimit::explicit(8 << 30)).unwrap_err();
         assert!(err.starts_with("this render's frame alone needs about 40.06 GiB"), "{err}");
     }
