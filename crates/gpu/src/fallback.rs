@@ -5,8 +5,12 @@
 //! point-light cube face); each light's views are cached as the CPU caches them (a layer is
 //! re-rendered only when its `ShadowView` changed). Probes are rendered with this backend's own
 //! raster and deferred-lighting passes, six faces per reflective or refractive object, once,
-//! when the object first has untraced pixels. One compute pass (`shaders/fallback.wgsl`, the
-//! twin of `FallbackScene::pixel`) then writes the three fallback targets.
+//! when the object first has untraced pixels. Planar refractive objects refract through the
+//! see-through layer (`SeeThrough`): the frame's view widened, rendered by the same raster and
+//! lighting passes without them into its own targets, every frame one has untraced pixels.
+//! Probe faces and that layer sample textures at level 0 (`RasterPass::encode_triangles`). One
+//! compute pass (`shaders/fallback.wgsl`, the twin of `FallbackScene::pixel`) then writes the
+//! three fallback targets.
 //!
 //! Inputs: the G-buffer targets, the mask, the camera, the per-object pixel counts and selection
 //! (which objects need the fallbacks). Outputs: `shadow`, `reflection`, `refraction` fallback
@@ -24,7 +28,7 @@ use bytemuck::{Pod, Zeroable};
 use hybrid_core::Stage;
 use hybrid_core::fallback::{
     FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowKind, ShadowMap, ShadowView, caster_meshes, plan_light_views, plan_probes,
-    scene_bounds,
+    scene_bounds, see_through_objects, see_through_view,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
@@ -112,14 +116,20 @@ pub struct GpuProbeFace {
     pub base: [u32; 4],
 }
 
-/// `FallbackParams` of fallback.wgsl.
+/// `FallbackParams` of fallback.wgsl: the lookups' settings and this frame's see-through layer
+/// (`hybrid_core::fallback::SeeThrough`: its size and view; `see_through` 0 when not rendered).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct GpuFallbackParams {
     pub pcf_radius: u32,
     pub probe_size: u32,
+    pub see_width: u32,
+    pub see_height: u32,
+    pub see_view_proj: [[f32; 4]; 4],
+    pub see_through: u32,
     pub _pad0: u32,
     pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// A Depth32Float texture array: the whole (for sampling) and one view per layer (to render).
@@ -216,14 +226,25 @@ pub struct FallbackGpu {
     /// The capsule's hit ids of a probe face (not the frame's).
     probe_hit_ids: Option<wgpu::Buffer>,
     params: wgpu::Buffer,
+    params_data: GpuFallbackParams,
     /// Per mesh: its object and its triangles (the probes leave their object's out).
     mesh_triangles: Vec<(u32, Range<u32>)>,
+    /// Per object: the planar refractive objects (`see_through_objects`), whose refraction looks
+    /// through the see-through layer (`ProbeGpu.info.z` in the lookups).
+    see_through_objects: Vec<bool>,
+    /// The triangles the see-through layer draws (all meshes but those objects'), in runs.
+    see_through_ranges: Vec<Range<u32>>,
+    /// The see-through layer's G-buffer and lighting (the frame's size widened by
+    /// `SEE_THROUGH_GUARD`; 1 × 1 until a frame needs it).
+    see_through_targets: FrameTargets,
     /// The three fallback targets (shadow, reflection, refraction) of the frame size.
     outputs: Option<[Target; 3]>,
     /// Shadow maps rendered per light (cascades, spot maps, cube faces) since this was made.
     pub shadow_map_renders: Vec<u64>,
     /// Probes rendered since this was made.
     pub probe_renders: u64,
+    /// See-through layers rendered since this was made (one per frame that needed it).
+    pub see_through_renders: u64,
 }
 
 impl FallbackGpu {
@@ -314,11 +335,16 @@ impl FallbackGpu {
                 first = r.end;
                 (m.object, r)
             })
-            .collect();
+            .collect::<Vec<(u32, Range<u32>)>>();
+        let see_through_objects = see_through_objects(prepared);
+        let see_through_ranges = triangle_runs(&mesh_triangles, |o| !see_through_objects.get(o as usize).copied().unwrap_or(false));
 
         // Probes: six layers per planned object.
         let mut plans = vec![None; s.objects.len()];
         let mut probe_data = vec![GpuProbe::zeroed(); s.objects.len().max(1)];
+        for (data, &see) in probe_data.iter_mut().zip(&see_through_objects) {
+            data.info[2] = u32::from(see);
+        }
         let mut layers = 0u32;
         for plan in plan_probes(prepared, &scene_bounds(prepared, false)) {
             let o = plan.object as usize;
@@ -327,7 +353,7 @@ impl FallbackGpu {
                 centre: plan.centre.extend(plan.far).to_array(),
                 box_min: b.min.extend(if plan.parallax_box.is_some() { 1.0 } else { 0.0 }).to_array(),
                 box_max: b.max.extend(0.0).to_array(),
-                info: [0, layers, 0, 0],
+                info: [0, layers, u32::from(see_through_objects[o]), 0],
             };
             plans[o] = Some((plan, layers));
             layers += 6;
@@ -369,15 +395,21 @@ impl FallbackGpu {
             mapped_at_creation: false,
         });
         let (distance_pipeline, distance_layout) = distance_pipeline(device);
+        let params_data = GpuFallbackParams {
+            pcf_radius: settings.pcf_radius,
+            probe_size: settings.probe_size,
+            see_width: 1,
+            see_height: 1,
+            see_view_proj: glam::Mat4::IDENTITY.to_cols_array_2d(),
+            see_through: 0,
+            _pad0: 0,
+            _pad1: 0,
+            _pad2: 0,
+        };
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("fallback.params"),
-            contents: bytemuck::bytes_of(&GpuFallbackParams {
-                pcf_radius: settings.pcf_radius,
-                probe_size: settings.probe_size,
-                _pad0: 0,
-                _pad1: 0,
-            }),
-            usage: wgpu::BufferUsages::UNIFORM,
+            contents: bytemuck::bytes_of(&params_data),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
 
         let (depth_pipeline, disc_pipeline, depth_layout) = depth_pipelines(device, scene);
@@ -414,9 +446,14 @@ impl FallbackGpu {
             probe_targets: None,
             probe_hit_ids: None,
             params,
+            params_data,
             mesh_triangles,
+            see_through_objects,
+            see_through_ranges,
+            see_through_targets: FrameTargets::raster_layer(device, 1, 1),
             outputs: None,
             probe_renders: 0,
+            see_through_renders: 0,
         })
     }
 
@@ -436,6 +473,12 @@ impl FallbackGpu {
             out.push(LightShadowMaps { light, kind: slot.kind, maps });
         }
         Ok(out)
+    }
+
+    /// Per object: whether its refraction looks through the see-through layer (planar
+    /// refractive objects, `hybrid_core::fallback::see_through_objects`).
+    pub fn see_through_objects(&self) -> &[bool] {
+        &self.see_through_objects
     }
 
     /// The three fallback targets (shadow, reflection, refraction), once a frame has made them.
@@ -526,16 +569,7 @@ impl FallbackGpu {
             let (plan, first_layer) = (*plan, *first_layer);
             let targets = self.probe_targets.get_or_insert_with(|| FrameTargets::new(&ctx.device, size, size));
             // The triangles of every mesh but the object's own, in runs.
-            let mut ranges: Vec<Range<u32>> = Vec::new();
-            for (o, r) in &self.mesh_triangles {
-                if *o == plan.object || r.is_empty() {
-                    continue;
-                }
-                match ranges.last_mut() {
-                    Some(last) if last.end == r.start => last.end = r.end,
-                    _ => ranges.push(r.clone()),
-                }
-            }
+            let ranges = triangle_runs(&self.mesh_triangles, |o| o != plan.object);
             let probe = Probe::new(plan, size);
             for face in 0..6u32 {
                 let camera = probe.face_camera(face as usize);
@@ -598,6 +632,48 @@ impl FallbackGpu {
             rendered += 1;
         }
         rendered
+    }
+
+    /// The see-through layer of a `width` × `height` frame seen by `camera`
+    /// (`hybrid_core::fallback::SeeThrough`), when a planar refractive object is in `needed`
+    /// (per object: has untraced pixels): the widened view (`see_through_view`) rasterized
+    /// without those objects' meshes (textures at level 0) and lit, in its own submission (the
+    /// frame uniforms hold its camera), every frame it is needed. Writes the lookups' params
+    /// (the layer's view, or none). Returns whether it was rendered; the caller must write the
+    /// frame's own uniforms again then.
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_see_through(
+        &mut self,
+        ctx: &GpuContext,
+        scene_gpu: &SceneGpu,
+        scene: &Scene,
+        raster: &RasterPass,
+        lighting: &LightingPass,
+        camera: &Camera,
+        (width, height): (u32, u32),
+        needed: &[bool],
+    ) -> bool {
+        let need = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
+        self.params_data.see_through = u32::from(need);
+        if need {
+            let (view, w, h) = see_through_view(camera, width, height);
+            if (self.see_through_targets.width, self.see_through_targets.height) != (w, h) {
+                self.see_through_targets = FrameTargets::raster_layer(&ctx.device, w, h);
+            }
+            let targets = &self.see_through_targets;
+            scene_gpu.write_uniforms(ctx, &view, w, h, &scene.environment);
+            let mut timer = StageTimer::disabled();
+            let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fallback: see-through") });
+            raster.encode_triangles(&mut enc, scene_gpu, targets, true, &self.see_through_ranges, &mut timer);
+            lighting.encode(&mut enc, scene_gpu, targets, &mut timer);
+            ctx.queue.submit([enc.finish()]);
+            self.see_through_renders += 1;
+            self.params_data.see_width = w;
+            self.params_data.see_height = h;
+            self.params_data.see_view_proj = view.view_projection(w as f32 / h.max(1) as f32).to_cols_array_2d();
+        }
+        ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&self.params_data));
+        need
     }
 
     /// Makes the three fallback targets for a `width` × `height` frame (kept while the size stays).
@@ -695,6 +771,10 @@ impl FallbackGpu {
             (15, self.probes.as_entire_binding()),
             (16, self.params.as_entire_binding()),
             (17, self.probe_distances.as_entire_binding()),
+            texture(18, &self.see_through_targets.position.view),
+            texture(19, &self.see_through_targets.normal.view),
+            texture(20, &self.see_through_targets.object_id.view),
+            texture(21, &self.see_through_targets.lighting.view),
         ];
         let entries: Vec<wgpu::BindGroupEntry> =
             resources.into_iter().map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }).collect();
@@ -810,7 +890,22 @@ fn distance_pipeline(device: &wgpu::Device) -> (wgpu::ComputePipeline, wgpu::Bin
     (pipeline, layout)
 }
 
-/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–17).
+/// The triangles of the meshes whose object passes `keep`, merged into runs.
+fn triangle_runs(mesh_triangles: &[(u32, Range<u32>)], keep: impl Fn(u32) -> bool) -> Vec<Range<u32>> {
+    let mut ranges: Vec<Range<u32>> = Vec::new();
+    for (o, r) in mesh_triangles {
+        if !keep(*o) || r.is_empty() {
+            continue;
+        }
+        match ranges.last_mut() {
+            Some(last) if last.end == r.start => last.end = r.end,
+            _ => ranges.push(r.clone()),
+        }
+    }
+    ranges
+}
+
+/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–21).
 fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
     let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
         binding,
@@ -847,6 +942,10 @@ fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePip
         entry(15, buffer(true)),
         entry(16, wgpu::BindingType::Buffer { ty: wgpu::BufferBindingType::Uniform, has_dynamic_offset: false, min_binding_size: None }),
         entry(17, buffer(true)),
+        entry(18, texture(float, d2)),
+        entry(19, texture(float, d2)),
+        entry(20, texture(wgpu::TextureSampleType::Uint, d2)),
+        entry(21, texture(float, d2)),
     ];
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("fallback.lookup"), entries: &entries });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -893,6 +992,7 @@ mod tests {
             "SHADOW_MAX_SLOPE",
             "SHADOW_BIAS_TEXELS",
             "PROBE_MARCH_STEPS",
+            "SEE_THROUGH_STEPS",
             "CUBE_FACE_UP",
         ] {
             assert!(FALLBACK_WGSL.contains(name) && !FALLBACK_WGSL.contains(&format!("const {name}")), "{name}");

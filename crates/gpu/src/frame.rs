@@ -444,8 +444,20 @@ impl<'s> GpuRenderer<'s> {
             // As the CPU: the spheres appear in the probes when they take part in the trace stage.
             let capsule = self.capsule.as_ref().filter(|_| self.spheres_in_trace).map(|c| (c, &self.spheres));
             renders.probes = fb.render_probes(&self.ctx, &self.gpu_scene, self.scene, &self.raster, &self.lighting, capsule, &needed);
-            if renders.probes > 0 {
-                // The probes' faces wrote their cameras into the frame uniforms.
+            // The see-through layer (planar refractive objects with untraced pixels), every frame.
+            let see_through = fb.render_see_through(
+                &self.ctx,
+                &self.gpu_scene,
+                self.scene,
+                &self.raster,
+                &self.lighting,
+                camera,
+                (targets.width, targets.height),
+                &needed,
+            );
+            if renders.probes > 0 || see_through {
+                // The probes' faces and the see-through layer wrote their cameras into the frame
+                // uniforms.
                 self.gpu_scene.write_uniforms(&self.ctx, camera, targets.width, targets.height, &self.scene.environment);
             }
             probe_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -78,7 +78,11 @@ fn fallback_structs_match_their_wgsl_layouts() {
             layout!(GpuShadowView, "ShadowViewGpu", [view_proj, near, far, texel_world, split_far, size, orthographic, array_index, layer]),
             layout!(GpuShadowLight, "ShadowLightGpu", [kind, first_view, view_count, _pad]),
             layout!(GpuProbe, "ProbeGpu", [centre, box_min, box_max, info]),
-            layout!(GpuFallbackParams, "FallbackParams", [pcf_radius, probe_size, _pad0, _pad1]),
+            layout!(
+                GpuFallbackParams,
+                "FallbackParams",
+                [pcf_radius, probe_size, see_width, see_height, see_view_proj, see_through, _pad0, _pad1, _pad2]
+            ),
         ],
     );
     let source = format!("{}\n{}", crate::shaders::constants(), crate::fallback::PROBE_DISTANCE_WGSL);

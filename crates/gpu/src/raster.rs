@@ -8,6 +8,8 @@
 //! ([`GBUFFER_COLOR_FORMATS`]) and reversed-Z depth (Greater, write on). No face culling: the
 //! CPU rasteriser draws both sides too.
 
+use std::sync::OnceLock;
+
 use hybrid_core::Stage;
 
 use crate::context::GpuContext;
@@ -19,9 +21,14 @@ use crate::timing::StageTimer;
 /// WGSL of the pass (common/*.wgsl is prepended).
 pub const SOURCE: &str = include_str!("shaders/raster.wgsl");
 
-/// The G-buffer render pipeline.
+/// The G-buffer render pipeline (and, made on first use, its level-0 twin for the fallbacks'
+/// layers).
 pub struct RasterPass {
     pipeline: wgpu::RenderPipeline,
+    device: wgpu::Device,
+    layout: wgpu::PipelineLayout,
+    module: wgpu::ShaderModule,
+    level0: OnceLock<wgpu::RenderPipeline>,
 }
 
 impl RasterPass {
@@ -34,7 +41,7 @@ impl RasterPass {
             immediate_size: 0,
         });
         let pipeline = gbuffer_pipeline(device, "raster", &layout, &module, "vs_main", "fs_main");
-        Self { pipeline }
+        Self { pipeline, device: device.clone(), layout, module, level0: OnceLock::new() }
     }
 
     /// Stage 1: one render pass over every triangle of the scene into the G-buffer targets and
@@ -60,7 +67,9 @@ impl RasterPass {
 
 impl RasterPass {
     /// As [`Self::encode`], drawing only the triangles in `ranges` (indices into group 0's
-    /// triangles): the fallbacks' probe faces leave their own object out.
+    /// triangles), with textures sampled at level 0 (`fs_level0`), as secondary rays sample
+    /// them: the fallbacks' layers (probe faces leave their own object out, the see-through
+    /// layer the planar refractive objects), as `hybrid_cpu::raster::rasterize_meshes`.
     pub fn encode_triangles(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -70,8 +79,11 @@ impl RasterPass {
         ranges: &[std::ops::Range<u32>],
         timer: &mut StageTimer,
     ) {
+        let pipeline = self
+            .level0
+            .get_or_init(|| gbuffer_pipeline(&self.device, "raster (level 0)", &self.layout, &self.module, "vs_main", "fs_level0"));
         let mut pass = begin_gbuffer_pass(encoder, targets, clear, "raster (triangle ranges)", timer.render(Stage::Raster));
-        pass.set_pipeline(&self.pipeline);
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &scene.bind_group, &[]);
         for r in ranges {
             pass.draw(3 * r.start..3 * r.end, 0..1);

@@ -54,6 +54,7 @@ pub fn constants() -> String {
         ("SHADOW_ARRAY_CUBE", crate::fallback::SHADOW_ARRAY_CUBE),
         ("PROBE_MARCH_STEPS", hybrid_core::fallback::PROBE_MARCH_STEPS),
         ("PROBE_REFINE_STEPS", hybrid_core::fallback::PROBE_REFINE_STEPS),
+        ("SEE_THROUGH_STEPS", hybrid_core::fallback::SEE_THROUGH_STEPS),
     ];
     // The sky kind is an i32 in WGSL (compared with a signed uniform field).
     let i32s = [("SKY_COLOR", SKY_COLOR), ("SKY_GRADIENT", SKY_GRADIENT), ("SKY_CUBE", SKY_CUBE)];

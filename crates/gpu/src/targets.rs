@@ -116,6 +116,34 @@ impl FrameTargets {
         }
     }
 
+    /// Targets for a layer that only the raster and lighting passes write (the fallbacks'
+    /// see-through layer): the G-buffer, depth and lighting at `width` × `height`, the rest
+    /// (mask, the trace outputs, final, packed) 1 × 1, unused.
+    pub fn raster_layer(device: &wgpu::Device, width: u32, height: u32) -> Self {
+        let full = |label: &str, format| Target::new(device, label, width, height, format);
+        let unused = |label: &str, format| Target::new(device, label, 1, 1, format);
+        Self {
+            width,
+            height,
+            position: full("layer.position", POSITION_FORMAT),
+            normal: full("layer.normal", COLOR_FORMAT),
+            emission: full("layer.emission", COLOR_FORMAT),
+            ambient: full("layer.ambient", COLOR_FORMAT),
+            diffuse: full("layer.diffuse", COLOR_FORMAT),
+            specular: full("layer.specular", COLOR_FORMAT),
+            optical: full("layer.optical", COLOR_FORMAT),
+            object_id: full("layer.object_id", OBJECT_ID_FORMAT),
+            mask: unused("layer.mask (unused)", MASK_FORMAT),
+            depth: full("layer.depth", DEPTH_FORMAT),
+            lighting: full("layer.lighting", COLOR_FORMAT),
+            shadow: unused("layer.shadow (unused)", COLOR_FORMAT),
+            reflection: unused("layer.reflection (unused)", COLOR_FORMAT),
+            refraction: unused("layer.refraction (unused)", COLOR_FORMAT),
+            final_image: unused("layer.final (unused)", FINAL_FORMAT),
+            packed: unused("layer.packed (unused)", PACKED_FORMAT),
+        }
+    }
+
     /// Every texture of the frame (destructured, so a new one cannot be left out): what
     /// `hybrid_core::memory::GPU_TARGET_BYTES_PER_PIXEL` counts (a test ties the two).
     pub fn all(&self) -> [&Target; 16] {

@@ -8,7 +8,8 @@ use std::path::Path;
 use std::sync::Arc;
 
 use glam::Vec3;
-use hybrid_core::fallback::Fallback;
+use hybrid_core::fallback::{Fallback, see_through_objects};
+use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
 use hybrid_core::{Frame, FrameSettings, Mode};
 use hybrid_cpu::frame::CpuRenderer;
@@ -185,8 +186,10 @@ fn tree_merge_sphere_shadows_match_the_cpu() {
     assert!(differing(&g.buffers.shadow_fallback, Vec3::ONE) > 50, "no shadows in the GPU's shadow fallback");
 }
 
-/// The pavilion: the pool and the glass walls take their reflections and refractions from
-/// probes marched through their distances; the sun's cascades shadow the floor.
+/// The pavilion: the glass walls take their reflections and refractions from probes marched
+/// through their distances, the pool's water (planar) its refraction from the see-through
+/// layer; the sun's cascades shadow the floor. Probe faces and the see-through layer sample
+/// textures at level 0 on both backends.
 #[test]
 fn pavilion_fallbacks_match_the_cpu() {
     let ctx = context();
@@ -195,9 +198,55 @@ fn pavilion_fallbacks_match_the_cpu() {
     let (w, h) = (96, 54);
     let (c, g) = render_both(&ctx, &scene, Mode::Raster, w, h);
     assert!(assert_fallbacks_match("pavilion", Mode::Raster, &c, &g, 0.02) > 0);
+    assert_see_through_matches("pavilion raster", &scene, &c, &g);
     small_budget(&mut scene, w, h);
     let (c, g) = render_both(&ctx, &scene, Mode::Hybrid, w, h);
     assert_fallbacks_match("pavilion", Mode::Hybrid, &c, &g, 0.02);
+}
+
+/// The see-through layer is rendered every frame that needs it (it depends on the view, no
+/// cache), and after the camera moved the GPU's lookups still match the CPU's.
+#[test]
+fn pavilion_see_through_follows_the_camera() {
+    let ctx = context();
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/pavilion.toml");
+    let scene = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let settings = FrameSettings { width: 96, height: 54, mode: Mode::Raster };
+    let mut cpu = CpuRenderer::new(&scene).unwrap();
+    let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap_or_else(|e| panic!("{e}"));
+    for k in 0..2 {
+        let offset = Vec3::new(0.4, 0.15, -0.3) * k as f32;
+        let camera = Camera { position: scene.camera.position + offset, ..scene.camera };
+        let c = cpu.render(&camera, settings, &mut |_| {});
+        let g = gpu.render(&camera, settings, &mut |_| {}).unwrap_or_else(|e| panic!("{e}"));
+        assert_fallbacks_match(&format!("pavilion frame {k}"), Mode::Raster, &c, &g, 0.02);
+        assert_see_through_matches(&format!("pavilion frame {k}"), &scene, &c, &g);
+        let fb = gpu.fallback_gpu().expect("the pavilion needs fallbacks");
+        assert_eq!(fb.see_through_renders, k + 1, "frame {k}: one see-through layer per frame");
+        assert_eq!(fb.see_through_objects(), &see_through_objects(&PreparedScene::new(&scene))[..]);
+    }
+}
+
+/// The refraction fallback over the untraced pixels of the planar refractive objects (where the
+/// see-through layer answers, not the probes) close to the CPU's, pixel by pixel: there are
+/// such pixels, and the mean of their largest channel difference is below 0.05 (the
+/// whole-image FLIP dilutes them among the rest).
+fn assert_see_through_matches(name: &str, scene: &Scene, c: &Frame, g: &Frame) {
+    let prepared = PreparedScene::new(scene);
+    let planar = see_through_objects(&prepared);
+    assert!(planar.iter().any(|&p| p), "{name}: the scene has a planar refractive object");
+    let pixels: Vec<usize> = (0..c.gbuffer.object_id.len())
+        .filter(|&i| {
+            let id = c.gbuffer.object_id[i];
+            hybrid_core::is_polygon(id) && c.gbuffer.mask[i] < 1e-4 && planar.get(id as usize).copied().unwrap_or(false)
+        })
+        .collect();
+    let (cr, gr) = (&c.buffers.refraction_fallback, &g.buffers.refraction_fallback);
+    let mean = pixels.iter().map(|&i| (cr[i] - gr[i]).abs().max_element()).sum::<f32>() / pixels.len().max(1) as f32;
+    let far = pixels.iter().filter(|&&i| (cr[i] - gr[i]).abs().max_element() > 0.1).count();
+    eprintln!("{name}: {} see-through pixels, mean max-channel difference {mean:.4}, {far} differ by > 0.1", pixels.len());
+    assert!(pixels.len() > 50, "{name}: {} untraced pixels of planar refractive objects", pixels.len());
+    assert!(mean < 0.05, "{name}: see-through refraction mean difference {mean:.4}");
 }
 
 /// The maps themselves, texel by texel: the same views, the same caster depths but for the

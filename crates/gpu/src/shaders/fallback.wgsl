@@ -1,7 +1,8 @@
 // fallback.wgsl — stage 3b's lookups (issue 18): the WGSL twin of
 // hybrid_core::fallback::FallbackScene::pixel for every covered polygon pixel the trace stage
-// left out (mask < MASK_EPSILON), from the shadow maps and the objects' probes; shadow 1,
-// reflection and refraction 0 elsewhere. common/*.wgsl and shadow_view.wgsl are prepended.
+// left out (mask < MASK_EPSILON), from the shadow maps, the objects' probes and (planar
+// refractive objects) the see-through layer; shadow 1, reflection and refraction 0 elsewhere.
+// common/*.wgsl and shadow_view.wgsl are prepended.
 
 // Per light (GPU light order = hybrid_core::shading::lights order): its views.
 struct ShadowLightGpu {
@@ -16,14 +17,21 @@ struct ProbeGpu {
     centre: vec4<f32>,  // w = the far plane (the distance where nothing was seen)
     box_min: vec4<f32>, // w = 1: box-projected against [box_min, box_max]
     box_max: vec4<f32>,
-    info: vec4<u32>,    // rendered, first layer (+ face), -, -
+    info: vec4<u32>,    // rendered, first layer (+ face), see-through object (0/1), -
 }
 
 struct FallbackParams {
     pcf_radius: u32,
     probe_size: u32,
+    // The see-through layer (hybrid_core::fallback::SeeThrough): its size and view, and whether
+    // this frame rendered it.
+    see_width: u32,
+    see_height: u32,
+    see_view_proj: mat4x4<f32>,
+    see_through: u32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
 }
 
 @group(1) @binding(0) var g_position: texture_2d<f32>;
@@ -45,6 +53,12 @@ struct FallbackParams {
 @group(1) @binding(16) var<uniform> params: FallbackParams;
 // Per probe texel (layer after layer, row-major): the distance from the centre to the surface seen.
 @group(1) @binding(17) var<storage, read> probe_distances: array<f32>;
+// The see-through layer: the frame's view widened, rasterized without the planar refractive
+// objects, lit.
+@group(1) @binding(18) var st_position: texture_2d<f32>;
+@group(1) @binding(19) var st_normal: texture_2d<f32>;
+@group(1) @binding(20) var st_object_id: texture_2d<u32>;
+@group(1) @binding(21) var st_color: texture_2d<f32>;
 
 // ShadowMap::lit: 1 where texel (x, y), clamped to the map, is no nearer than z_ref.
 fn lit(v: ShadowViewGpu, x: i32, y: i32, z_ref: f32) -> f32 {
@@ -283,6 +297,60 @@ fn look(object: u32, p: vec3<f32>, dir: vec3<f32>) -> vec3<f32> {
     return sky(dir);
 }
 
+// SeeThrough::pixel_of: the layer pixel a world point lands on; x = -1 off the layer.
+fn see_pixel(x: vec3<f32>) -> vec2<i32> {
+    let c = params.see_view_proj * vec4<f32>(x, 1.0);
+    if c.w <= 0.0 {
+        return vec2<i32>(-1);
+    }
+    let ndc = c.xyz / c.w;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    if !(uv.x >= 0.0 && uv.x < 1.0 && uv.y >= 0.0 && uv.y < 1.0) {
+        return vec2<i32>(-1);
+    }
+    let size = vec2<i32>(i32(params.see_width), i32(params.see_height));
+    return min(vec2<i32>(uv * vec2<f32>(size)), size - vec2<i32>(1));
+}
+
+// SeeThrough::refraction: the layer's colour along unit t from p (w = 1), or w = 0 where
+// nothing lies behind p (the probe answers then). The distance starts as the surface's behind
+// p and is refined SEE_THROUGH_STEPS times against the tangent plane of the surface where the
+// point lands; a point that leaves the layer keeps the last pixel in it.
+fn see_through_refraction(p: vec3<f32>, t: vec3<f32>) -> vec4<f32> {
+    let i = see_pixel(p);
+    if i.x < 0 || textureLoad(st_object_id, i, 0).x == NO_OBJECT {
+        return vec4<f32>(0.0);
+    }
+    var d = distance(textureLoad(st_position, i, 0).xyz, p);
+    var j = i;
+    for (var step = 0u; step < SEE_THROUGH_STEPS; step++) {
+        let k = see_pixel(p + t * d);
+        if k.x < 0 {
+            break;
+        }
+        j = k;
+        if textureLoad(st_object_id, k, 0).x == NO_OBJECT {
+            break;
+        }
+        let q = textureLoad(st_position, k, 0).xyz;
+        let n = textureLoad(st_normal, k, 0).xyz;
+        let denom = dot(t, n);
+        if abs(denom) < 1e-4 {
+            break;
+        }
+        let next = dot(q - p, n) / denom;
+        if !(next > 0.0 && is_finite(next)) {
+            break;
+        }
+        d = next;
+    }
+    let last = see_pixel(p + t * d);
+    if last.x >= 0 {
+        j = last;
+    }
+    return vec4<f32>(textureLoad(st_color, j, 0).xyz, 1.0);
+}
+
 @compute @workgroup_size(8, 8)
 fn cs_fallback(@builtin(global_invocation_id) gid: vec3<u32>) {
     let size = textureDimensions(out_shadow);
@@ -338,7 +406,16 @@ fn cs_fallback(@builtin(global_invocation_id) gid: vec3<u32>) {
             reflection = look(id, s.position, normalize_or(reflect_dir(incident, s.normal), vec3<f32>(0.0)));
         }
         if s.opacity < 1.0 {
-            refraction = look(id, s.position, refract_or_reflect(incident, s.normal, frame.env_ambient.w, s.ior).xyz);
+            let dir = refract_or_reflect(incident, s.normal, frame.env_ambient.w, s.ior).xyz;
+            var through = vec4<f32>(0.0);
+            if params.see_through != 0u && id < arrayLength(&probes) && probes[id].info.z != 0u {
+                through = see_through_refraction(s.position, dir);
+            }
+            if through.w > 0.0 {
+                refraction = through.xyz;
+            } else {
+                refraction = look(id, s.position, dir);
+            }
         }
     }
     textureStore(out_shadow, px, vec4<f32>(shadow, 1.0));

@@ -71,3 +71,22 @@ fn fs_main(in: VsOut) -> GBufferOut {
     let s = evaluate_surface(p);
     return gbuffer_out(s, meshes[mesh].object);
 }
+
+// The fallbacks' raster layers (probe faces, the see-through layer): as fs_main with textures
+// sampled at level 0 (footprint 0), as a secondary ray's hit samples them
+// (hybrid_cpu::raster's `level0`).
+@fragment
+fn fs_level0(in: VsOut) -> GBufferOut {
+    let mesh = triangles[in.tri].mesh;
+    var p: SurfacePoint;
+    p.mesh = mesh;
+    p.position = in.world;
+    p.normal = in.normal;
+    p.geometric_normal = in.geometric_normal;
+    p.uv = in.uv;
+    p.tangent = vec4<f32>(in.tangent, in.tangent_sign);
+    p.color = in.color;
+    p.uv_footprint = 0.0;
+    let s = evaluate_surface(p);
+    return gbuffer_out(s, meshes[mesh].object);
+}
