@@ -133,16 +133,6 @@ impl ShadowView {
         let (n, f) = (self.near, self.far);
         if self.orthographic { (f - d) / (f - n) } else { n * f / ((f - n) * d.max(1e-6)) - n / (f - n) }
     }
-
-    /// The bytes that identify the view (a cached map is reused while they stay the same).
-    pub fn key(&self) -> [u32; 20] {
-        let mut k = [0u32; 20];
-        for (o, v) in k.iter_mut().zip(self.view_proj.to_cols_array()) {
-            *o = v.to_bits();
-        }
-        (k[16], k[17], k[18], k[19]) = (self.size, self.near.to_bits(), self.far.to_bits(), self.split_far.to_bits());
-        k
-    }
 }
 
 /// Which light a set of views belongs to, and how a point picks its view.
@@ -661,18 +651,12 @@ pub fn object_effects(scene: &Scene, traced: &[u64], untraced: &[u64], fallback:
         .enumerate()
         .filter(|(i, _)| traced.get(*i).copied().unwrap_or(0) + untraced.get(*i).copied().unwrap_or(0) > 0)
         .map(|(i, o)| {
-            let path = |has: bool| {
-                if !has {
-                    EffectPath::None
-                } else if traced[i] > 0 && untraced[i] == 0 {
-                    EffectPath::Traced
-                } else if fallback == Fallback::Raster {
-                    if traced[i] > 0 { EffectPath::Traced } else { EffectPath::Raster }
-                } else if traced[i] > 0 {
-                    EffectPath::Traced
-                } else {
-                    EffectPath::None
-                }
+            // Traced where any pixel was traced; otherwise the fallback's path, or none.
+            let path = |has: bool| match (has, traced[i] > 0, fallback) {
+                (false, _, _) => EffectPath::None,
+                (true, true, _) => EffectPath::Traced,
+                (true, false, Fallback::Raster) => EffectPath::Raster,
+                (true, false, Fallback::None) => EffectPath::None,
             };
             ObjectEffects {
                 id: i,
@@ -713,13 +697,15 @@ pub fn see_through_objects(prepared: &PreparedScene) -> Vec<bool> {
         .enumerate()
         .map(|(i, o)| {
             let b = prepared.object_bounds[i];
-            if b.is_empty() || !o.is_refractive(&scene.materials) {
-                return false;
-            }
-            let e = b.max - b.min;
-            e.min_element() <= PLANAR_THICKNESS * e.max_element()
+            !b.is_empty() && o.is_refractive(&scene.materials) && is_planar(&b)
         })
         .collect()
+}
+
+/// Whether world bounds are planar: smallest extent at most [`PLANAR_THICKNESS`] of the largest.
+pub fn is_planar(bounds: &Aabb) -> bool {
+    let e = bounds.max - bounds.min;
+    e.min_element() <= PLANAR_THICKNESS * e.max_element()
 }
 
 /// Steps of the see-through layer's ray intersection ([`SeeThrough::refraction`]).
@@ -826,11 +812,7 @@ impl FallbackScene<'_> {
     /// instead of rays.
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
         let scene = self.scene;
-        let incident = if self.camera.is_orthographic() {
-            self.camera.forward()
-        } else {
-            (s.position - self.camera.position).normalize_or(self.camera.forward())
-        };
+        let incident = self.camera.incident_towards(s.position);
         let view = -incident;
         let view_distance = (s.position - self.camera.position).dot(self.camera.forward());
 

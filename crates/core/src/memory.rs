@@ -178,13 +178,8 @@ pub fn fallback_bytes(scene: &Scene, backend: Backend, width: u32, height: u32) 
     let probes =
         scene.objects.iter().filter(|o| o.is_reflective(&scene.materials) || o.is_refractive(&scene.materials)).count() as u64 * probe;
     // Planar refractive objects (`fallback::see_through_objects`, from the objects' bounds).
-    let planar = scene.objects.iter().any(|o| {
-        o.is_refractive(&scene.materials)
-            && o.world_bounds().is_some_and(|b| {
-                let e = b.max - b.min;
-                e.min_element() <= crate::fallback::PLANAR_THICKNESS * e.max_element()
-            })
-    });
+    let planar =
+        scene.objects.iter().any(|o| o.is_refractive(&scene.materials) && o.world_bounds().is_some_and(|b| crate::fallback::is_planar(&b)));
     let see_through = if planar {
         let layer_pixels = (pixels as f64 * (SEE_THROUGH_GUARD * SEE_THROUGH_GUARD) as f64).ceil() as u64;
         layer_pixels.saturating_mul(GBUFFER_BYTES_PER_PIXEL + size_of::<Vec3>() as u64)

@@ -4,6 +4,7 @@
 //! (`raster::rasterize` with a layer), with the same surfaces ([`rt_surface`]).
 
 use glam::Vec3;
+use hybrid_core::depth_merge::{PackedRtFrame, unpack_into};
 use hybrid_core::{GBuffer, RT_SCENE_OBJECT, RtLayer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
@@ -14,6 +15,18 @@ use crate::camera_rays::PrimaryRays;
 /// primary rays, `rt-only`): wherever the layer's depth is Greater than the G-buffer's, the pixel
 /// becomes the RT-scene's ([`RT_SCENE_OBJECT`], [`rt_surface`]). Same result as passing the layer
 /// to [`crate::raster::rasterize`]. A layer of another size is ignored (with a warning).
+/// Block U over a whole packed frame into `layer` (the frame's size; every texel written), in
+/// parallel runs of texels (each is independent).
+pub fn unpack_layer_into(packed: &PackedRtFrame, layer: &mut RtLayer) {
+    const RUN: usize = 16 * 1024;
+    layer
+        .color
+        .par_chunks_mut(RUN)
+        .zip(layer.depth.par_chunks_mut(RUN))
+        .zip(packed.texels.par_chunks(RUN))
+        .for_each(|((color, depth), texels)| unpack_into(texels, color, depth));
+}
+
 pub fn merge_rt_layer(gbuffer: &mut GBuffer, layer: &RtLayer, camera: &Camera) {
     let (w, h) = (gbuffer.width, gbuffer.height);
     if !layer_fits(layer, w, h) {

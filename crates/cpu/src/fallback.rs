@@ -9,7 +9,6 @@
 
 use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
-use hybrid_core::depth_merge::unpack_into;
 use hybrid_core::fallback::{
     FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, SeeThrough, ShadowMap, ShadowView, caster_meshes, plan_light_views,
     plan_probes, project, scene_bounds, see_through_objects, see_through_view,
@@ -209,7 +208,7 @@ fn render_probe(prepared: &PreparedScene, mut capsule: Option<&mut PointCloudCap
             let mut packed = hybrid_core::depth_merge::PackedRtFrame::new(size, size);
             c.render(&request, &mut packed);
             let mut layer = RtLayer::new(size, size);
-            unpack_into(&packed.texels, &mut layer.color, &mut layer.depth);
+            depth_merge::unpack_layer_into(&packed, &mut layer);
             layer
         });
         let mut g = raster::rasterize_meshes(prepared, &camera, size, size, &include);

@@ -5,13 +5,12 @@ use std::time::Instant;
 
 use glam::Vec3;
 pub use hybrid_core::Frame;
-use hybrid_core::depth_merge::{PackedRtFrame, unpack_into};
+use hybrid_core::depth_merge::PackedRtFrame;
 use hybrid_core::report::{CapsuleReport, FrameReport, RayCounts, StageTimings};
 use hybrid_core::stage::{HeuristicStage, MaskChoice};
 use hybrid_core::{FrameBuffers, FrameSettings, GBuffer, Mode, NO_OBJECT, RtLayer, Stage};
 use hybrid_heuristic::{Heuristic, HeuristicReport, count_visible_pixels, write_mask};
 use hybrid_scene::{Camera, Scene};
-use rayon::prelude::*;
 
 use crate::bvh::SceneBvh;
 use crate::capsule::{CapsuleError, CapsuleRequest, PointCloudCapsule, PrimaryVisibility, RtCapsule};
@@ -206,20 +205,14 @@ impl<'s> CpuRenderer<'s> {
         let request = CapsuleRequest { camera: *camera, width: settings.width, height: settings.height, clip_depth };
         let stats = capsule.render(&request, &mut packed);
         let unpack_start = Instant::now();
-        // Block U, in parallel runs of texels (each is independent). Every texel is written, so
-        // last frame's layer of the same size needs no clearing.
+        // Block U. Every texel is written, so last frame's layer of the same size needs no
+        // clearing.
         let mut layer = self
             .spare_rt_layer
             .take()
             .filter(|l| (l.width, l.height) == (settings.width, settings.height))
             .unwrap_or_else(|| RtLayer::new(settings.width, settings.height));
-        const RUN: usize = 16 * 1024;
-        layer
-            .color
-            .par_chunks_mut(RUN)
-            .zip(layer.depth.par_chunks_mut(RUN))
-            .zip(packed.texels.par_chunks(RUN))
-            .for_each(|((color, depth), texels)| unpack_into(texels, color, depth));
+        depth_merge::unpack_layer_into(&packed, &mut layer);
         let report = CapsuleReport {
             points: stats.points,
             build_ms: stats.build_ms,

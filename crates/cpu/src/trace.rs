@@ -163,11 +163,7 @@ impl Tracer<'_, '_> {
             let (_, dir, _) = self.primary.ray(x, y);
             return (Vec3::ONE, sky(&scene.environment, &scene.textures, dir), Vec3::ZERO);
         };
-        let incident = if self.camera.is_orthographic() {
-            self.camera.forward()
-        } else {
-            (s.position - self.camera.position).normalize_or(self.camera.forward())
-        };
+        let incident = self.camera.incident_towards(s.position);
         let view = -incident;
 
         (self.shadow_rays(&s, view, caches, rays), self.reflection_ray(&s, incident, rays), self.refraction_ray(&s, incident, rays))

@@ -83,6 +83,13 @@ impl Camera {
     pub fn forward(&self) -> Vec3 {
         (self.target - self.position).normalize_or(Vec3::NEG_Z)
     }
+
+    /// Unit direction of the view ray that reaches world point `p` (from the camera towards it):
+    /// the forward direction for an orthographic camera (or `p` at the eye).
+    #[inline]
+    pub fn incident_towards(&self, p: Vec3) -> Vec3 {
+        if self.is_orthographic() { self.forward() } else { (p - self.position).normalize_or(self.forward()) }
+    }
 }
 
 /// A camera keyframe: where the camera is and what it looks at, at `time` seconds.

@@ -58,6 +58,11 @@ fn fs_main(in: VsOut) -> GBufferOut {
     if is_finite(footprint_raw) {
         footprint = footprint_raw;
     }
+    return gbuffer_at(in, footprint);
+}
+
+// The G-buffer outputs of the surface under fragment `in`, textures sampled with `footprint`.
+fn gbuffer_at(in: VsOut, footprint: f32) -> GBufferOut {
     let mesh = triangles[in.tri].mesh;
     var p: SurfacePoint;
     p.mesh = mesh;
@@ -77,16 +82,5 @@ fn fs_main(in: VsOut) -> GBufferOut {
 // (hybrid_cpu::raster's `level0`).
 @fragment
 fn fs_level0(in: VsOut) -> GBufferOut {
-    let mesh = triangles[in.tri].mesh;
-    var p: SurfacePoint;
-    p.mesh = mesh;
-    p.position = in.world;
-    p.normal = in.normal;
-    p.geometric_normal = in.geometric_normal;
-    p.uv = in.uv;
-    p.tangent = vec4<f32>(in.tangent, in.tangent_sign);
-    p.color = in.color;
-    p.uv_footprint = 0.0;
-    let s = evaluate_surface(p);
-    return gbuffer_out(s, meshes[mesh].object);
+    return gbuffer_at(in, 0.0);
 }
