@@ -15,9 +15,9 @@
 use glam::{Mat4, Vec2, Vec3, Vec4Swizzles};
 use hybrid_scene::{Aabb, Camera, Projection, Scene};
 
-use crate::Surface;
 use crate::prepare::PreparedScene;
 use crate::shading::{FrameLights, Light, facing, lights, reflect, refract_or_reflect, sky};
+use crate::{GBuffer, Surface};
 
 /// What pixels of objects the heuristic did not select get (`--fallback`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -702,6 +702,31 @@ pub fn see_through_objects(prepared: &PreparedScene) -> Vec<bool> {
         .collect()
 }
 
+/// Per object: whether a planar object ([`is_planar`]) is a closed slab, such as a pane of glass
+/// modelled as a thin box: it has faces looking both ways along its thinnest axis, so a ray
+/// refracted into it leaves through the opposite face, bent back to its first direction (the
+/// faces are parallel; the sideways shift, at most the slab's thickness, is left out). A single
+/// sheet, such as a pool's water surface, has faces on one side only: the ray stays refracted.
+pub fn slab_objects(prepared: &PreparedScene) -> Vec<bool> {
+    let mut faces = vec![[false; 2]; prepared.scene.objects.len()];
+    for mesh in &prepared.meshes {
+        let o = mesh.object as usize;
+        let b = prepared.object_bounds[o];
+        if b.is_empty() || !is_planar(&b) {
+            continue;
+        }
+        let axis = (b.max - b.min).min_position();
+        for t in &mesh.indices {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            let n = (b - a).cross(c - a).normalize_or_zero()[axis];
+            if n.abs() > 0.9 {
+                faces[o][usize::from(n > 0.0)] = true;
+            }
+        }
+    }
+    faces.into_iter().map(|[neg, pos]| neg && pos).collect()
+}
+
 /// Whether world bounds are planar: smallest extent at most [`PLANAR_THICKNESS`] of the largest.
 pub fn is_planar(bounds: &Aabb) -> bool {
     let e = bounds.max - bounds.min;
@@ -732,16 +757,16 @@ pub fn see_through_view(camera: &Camera, width: u32, height: u32) -> (Camera, u3
 }
 
 /// The see-through layer: the frame's view, widened ([`see_through_view`]), rendered with the
-/// raster path without the planar refractive objects ([`see_through_objects`]), lit. A planar object's refraction ray from `p`
-/// along `t` is intersected with the layer's surfaces (each step: with the tangent plane of the
-/// surface where the current guess lands on screen) and looks up the layer's colour there.
+/// raster path without the planar refractive objects ([`see_through_objects`]), lit. A planar
+/// object's refraction ray from `p` along `t` is intersected with the layer's surfaces (each
+/// step: with the tangent plane of the surface where the current guess lands on screen); the
+/// texel it lands on is then shaded as a pixel of the frame would be with fallbacks
+/// ([`FallbackScene::pixel`]): its lighting with its own shadows, reflections and refractions.
 pub struct SeeThrough<'a> {
-    pub width: u32,
-    pub height: u32,
     pub view_proj: Mat4,
-    pub position: &'a [Vec3],
-    pub normal: &'a [Vec3],
-    pub object_id: &'a [u32],
+    /// The layer's G-buffer (its width and height are the layer's).
+    pub layer: &'a GBuffer,
+    /// The layer's lighting (listing 5, unshadowed).
     pub color: &'a [Vec3],
 }
 
@@ -749,29 +774,31 @@ impl SeeThrough<'_> {
     /// The screen pixel a world point lands on, if on screen.
     #[inline]
     fn pixel_of(&self, x: Vec3) -> Option<usize> {
+        let (w, h) = (self.layer.width, self.layer.height);
         let (uv, _) = project(&self.view_proj, x)?;
         ((0.0..1.0).contains(&uv.x) && (0.0..1.0).contains(&uv.y))
-            .then(|| (uv.y * self.height as f32) as usize * self.width as usize + (uv.x * self.width as f32) as usize)
+            .then(|| (uv.y * h as f32) as usize * w as usize + (uv.x * w as f32) as usize)
     }
 
-    /// The refraction along unit `t` from `p`, or `None` where nothing lies behind `p` (the
-    /// probe answers then). The distance starts as the surface's behind `p` and is refined
-    /// [`SEE_THROUGH_STEPS`] times against the tangent plane of the surface where the point
-    /// lands; a point that leaves the layer keeps the last pixel in it.
-    pub fn refraction(&self, p: Vec3, t: Vec3) -> Option<Vec3> {
+    /// The layer texel the refraction along unit `t` from `p` meets, or `None` where nothing
+    /// lies behind `p` (the probe answers then). The distance starts as the surface's behind
+    /// `p` and is refined [`SEE_THROUGH_STEPS`] times against the tangent plane of the surface
+    /// where the point lands; a point that leaves the layer keeps the last pixel in it.
+    pub fn texel_along(&self, p: Vec3, t: Vec3) -> Option<usize> {
+        let g = self.layer;
         let i = self.pixel_of(p)?;
-        if self.object_id[i] == crate::NO_OBJECT {
+        if g.object_id[i] == crate::NO_OBJECT {
             return None;
         }
-        let mut d = self.position[i].distance(p);
+        let mut d = g.position[i].distance(p);
         let mut j = i;
         for _ in 0..SEE_THROUGH_STEPS {
             let Some(k) = self.pixel_of(p + t * d) else { break };
             j = k;
-            if self.object_id[k] == crate::NO_OBJECT {
+            if g.object_id[k] == crate::NO_OBJECT {
                 break;
             }
-            let (q, n) = (self.position[k], self.normal[k]);
+            let (q, n) = (g.position[k], g.normal[k]);
             let denom = t.dot(n);
             if denom.abs() < 1e-4 {
                 break;
@@ -785,7 +812,7 @@ impl SeeThrough<'_> {
         if let Some(k) = self.pixel_of(p + t * d) {
             j = k;
         }
-        self.color.get(j).copied()
+        (j < self.color.len()).then_some(j)
     }
 }
 
@@ -801,6 +828,9 @@ pub struct FallbackScene<'a> {
     pub pcf_radius: u32,
     /// Per object: whether its refraction uses `see_through` ([`see_through_objects`]).
     pub see_through_objects: &'a [bool],
+    /// Per object: whether it is a closed slab ([`slab_objects`]), whose refraction leaves it
+    /// along the incident direction.
+    pub slab_objects: &'a [bool],
     /// The see-through layer, when a planar refractive object needed it this frame.
     pub see_through: Option<SeeThrough<'a>>,
 }
@@ -811,6 +841,25 @@ impl FallbackScene<'_> {
     /// shadow maps, the object's probe and (planar refractive objects) the see-through layer
     /// instead of rays.
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
+        self.terms(object, s, self.see_through.as_ref())
+    }
+
+    /// Texel `j` of the see-through layer as the blend would show it with fallbacks: its
+    /// lighting through eq. 4–6 with its own fallback terms (its probe, not the layer again).
+    pub fn see_through_texel(&self, st: &SeeThrough, j: usize) -> Vec3 {
+        let (g, lit) = (st.layer, st.color[j]);
+        let id = g.object_id[j];
+        match g.surface(j) {
+            Some(s) if crate::is_polygon(id) && s.normal.length_squared() > 0.0 => {
+                let (shadow, reflection, refraction) = self.terms(id, &s, None);
+                crate::blend::blend_pixel(lit, shadow, reflection, refraction, g.optical[j], 1.0)
+            }
+            _ => lit,
+        }
+    }
+
+    /// [`Self::pixel`], looking through `see_through` where the object is planar and refractive.
+    fn terms(&self, object: u32, s: &Surface, see_through: Option<&SeeThrough>) -> (Vec3, Vec3, Vec3) {
         let scene = self.scene;
         let incident = self.camera.incident_towards(s.position);
         let view = -incident;
@@ -847,8 +896,12 @@ impl FallbackScene<'_> {
         let reflection = if s.reflectivity > 0.0 { look(reflect(incident, s.normal).normalize_or_zero()) } else { Vec3::ZERO };
         let refraction = if s.opacity < 1.0 {
             let (dir, _tir) = refract_or_reflect(incident, s.normal, scene.environment.ior, s.ior);
-            let through = match &self.see_through {
-                Some(st) if self.see_through_objects.get(object as usize).copied().unwrap_or(false) => st.refraction(s.position, dir),
+            let flag = |f: &[bool]| f.get(object as usize).copied().unwrap_or(false);
+            let through = match see_through {
+                // Through a slab: bent in, bent back out by the parallel face behind.
+                Some(st) if flag(self.see_through_objects) => {
+                    st.texel_along(s.position, if flag(self.slab_objects) { incident } else { dir }).map(|j| self.see_through_texel(st, j))
+                }
                 _ => None,
             };
             through.unwrap_or_else(|| look(dir))
@@ -1007,23 +1060,17 @@ mod tests {
                 color.push(Vec3::splat(x as f32));
             }
         }
-        let normal = vec![Vec3::Y; n * n];
-        let ids = vec![0u32; n * n];
-        let st = SeeThrough {
-            width: 8,
-            height: 8,
-            view_proj: camera.view_projection(1.0),
-            position: &position,
-            normal: &normal,
-            object_id: &ids,
-            color: &color,
-        };
-        let c = st.refraction(Vec3::new(0.1, 1.0, 0.0), Vec3::new(1.0, -1.0, 0.0).normalize()).unwrap();
-        assert_eq!(c, Vec3::splat(6.0));
+        let mut layer = GBuffer::new(8, 8);
+        layer.position = position;
+        layer.normal = vec![Vec3::Y; n * n];
+        layer.object_id = vec![0u32; n * n];
+        let st = SeeThrough { view_proj: camera.view_projection(1.0), layer: &layer, color: &color };
+        let j = st.texel_along(Vec3::new(0.1, 1.0, 0.0), Vec3::new(1.0, -1.0, 0.0).normalize()).unwrap();
+        assert_eq!(color[j], Vec3::splat(6.0));
         // Nothing behind: no answer (the probe's turn).
-        let none = vec![crate::NO_OBJECT; n * n];
-        let empty = SeeThrough { object_id: &none, ..st };
-        assert_eq!(empty.refraction(Vec3::new(0.1, 1.0, 0.0), Vec3::NEG_Y), None);
+        let empty = GBuffer::new(8, 8);
+        let st = SeeThrough { layer: &empty, ..st };
+        assert_eq!(st.texel_along(Vec3::new(0.1, 1.0, 0.0), Vec3::NEG_Y), None);
         // The widened view keeps the eye and orientation and grows by the guard factor.
         let (wide, w, h) = see_through_view(&camera, 64, 32);
         assert_eq!((wide.position, w, h), (camera.position, 96, 48));

@@ -11,7 +11,7 @@ use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
 use hybrid_core::fallback::{
     FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, SeeThrough, ShadowMap, ShadowView, caster_meshes, plan_light_views,
-    plan_probes, project, scene_bounds, see_through_objects, see_through_view,
+    plan_probes, project, scene_bounds, see_through_objects, see_through_view, slab_objects,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
@@ -38,6 +38,8 @@ pub struct FallbackCache {
     /// layer; per mesh: the meshes that layer draws (all the others).
     see_through_objects: Vec<bool>,
     see_through_meshes: Vec<bool>,
+    /// Per object: closed slabs (`slab_objects`), seen through unbent.
+    slab_objects: Vec<bool>,
     bounds: Aabb,
     /// Shadow maps rendered per light (cascades, spot maps, cube faces), since the cache was made.
     pub shadow_map_renders: Vec<u64>,
@@ -65,6 +67,7 @@ impl FallbackCache {
             casters,
             see_through_objects,
             see_through_meshes,
+            slab_objects: slab_objects(prepared),
             bounds,
             shadow_map_renders: vec![0; n_lights],
             probe_renders: 0,
@@ -136,6 +139,24 @@ impl FallbackCache {
             self.maps[lv.light] = Some(LightShadowMaps { light: lv.light, kind: lv.kind, maps });
         }
 
+        // The see-through layer, when a planar refractive object has untraced pixels: the view
+        // rasterized without those objects, lit. Its texels are shaded with fallbacks too, so
+        // what shows in it needs probes as well.
+        let see_through_needed = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
+        let layer = see_through_needed.then(|| {
+            let (view, w, h) = see_through_view(camera, gbuffer.width, gbuffer.height);
+            let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
+            let lit = lighting::deferred_lighting(&g, scene, &view);
+            (g, lit, view)
+        });
+        if let Some((g, _, _)) = &layer {
+            for &id in &g.object_id {
+                if let Some(x) = needed.get_mut(id as usize) {
+                    *x = true;
+                }
+            }
+        }
+
         // Probes of the reflective and refractive objects that need one, once each.
         for (object, need) in needed.iter().enumerate() {
             if !need || self.probes[object].is_some() {
@@ -147,16 +168,6 @@ impl FallbackCache {
             renders.probes += 1;
         }
 
-        // The see-through layer, when a planar refractive object has untraced pixels: the view
-        // rasterized without those objects, lit.
-        let see_through_needed = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
-        let layer = see_through_needed.then(|| {
-            let (view, w, h) = see_through_view(camera, gbuffer.width, gbuffer.height);
-            let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
-            let lit = lighting::deferred_lighting(&g, scene, &view);
-            (g, lit, view)
-        });
-
         // The lookups.
         let frame_lights = FrameLights::new(&scene.lights, &scene.environment);
         let fb = FallbackScene {
@@ -167,13 +178,10 @@ impl FallbackCache {
             camera,
             pcf_radius: self.settings.pcf_radius,
             see_through_objects: &self.see_through_objects,
+            slab_objects: &self.slab_objects,
             see_through: layer.as_ref().map(|(g, lit, view)| SeeThrough {
-                width: g.width,
-                height: g.height,
                 view_proj: view.view_projection(g.width as f32 / g.height.max(1) as f32),
-                position: &g.position,
-                normal: &g.normal,
-                object_id: &g.object_id,
+                layer: g,
                 color: lit,
             }),
         };
