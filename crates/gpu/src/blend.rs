@@ -10,7 +10,9 @@ use crate::heuristic::compute_pipeline;
 use crate::targets::{FINAL_FORMAT, FrameTargets, Target};
 use crate::timing::StageTimer;
 
-pub(crate) const BLEND_WGSL: &str = include_str!("shaders/blend.wgsl");
+/// The blend pass's WGSL after eq. 4–6 (`blend_equations.wgsl`, which fallback.wgsl shares; the
+/// constants header is prepended).
+pub(crate) const BLEND_WGSL: &str = concat!(include_str!("shaders/blend_equations.wgsl"), "\n", include_str!("shaders/blend.wgsl"));
 
 /// Blend workgroup side (blend.wgsl `@workgroup_size(8, 8, 1)`).
 const GROUP: u32 = 8;

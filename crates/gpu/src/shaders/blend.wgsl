@@ -11,25 +11,7 @@
 @group(0) @binding(5) var mask: texture_2d<f32>;
 @group(0) @binding(6) var final_image: texture_storage_2d<rgba8unorm, write>;
 
-// Listing 10: `heurVal < 0.0001` means "not traced" (hybrid_core::blend::MASK_EPSILON).
-
-// Eq. 5/6 averaged: CM = OM·M + (1 − OM)(OR·R + (1 − OR)·C); CR = OR·R + (1 − OR)(OM·M + (1 − OM)·C).
-fn combine(c: vec3<f32>, m: vec3<f32>, r: vec3<f32>, reflectivity: f32, transparency: f32) -> vec3<f32> {
-    let om = reflectivity;
-    let tr = transparency;
-    let cm = om * m + (1.0 - om) * (tr * r + (1.0 - tr) * c);
-    let cr = tr * r + (1.0 - tr) * (om * m + (1.0 - om) * c);
-    return (cm + cr) * 0.5;
-}
-
-fn blend_pixel(l: vec3<f32>, s: vec3<f32>, m: vec3<f32>, r: vec3<f32>, opt: vec3<f32>, mask_value: f32) -> vec3<f32> {
-    if mask_value < MASK_EPSILON {
-        return l;
-    }
-    // Eq. 4: C = L − (1 − S).
-    let c = l - (vec3<f32>(1.0) - s);
-    return combine(c, m, r, opt.x, 1.0 - opt.z);
-}
+// combine and blend_pixel (eq. 4–6) are in blend_equations.wgsl, prepended.
 
 fn srgb_encode(x: f32) -> f32 {
     let c = clamp(x, 0.0, 1.0);
