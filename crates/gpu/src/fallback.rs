@@ -28,7 +28,7 @@ use bytemuck::{Pod, Zeroable};
 use hybrid_core::Stage;
 use hybrid_core::fallback::{
     FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowKind, ShadowMap, ShadowView, caster_meshes, plan_light_views, plan_probes,
-    scene_bounds, see_through_objects, see_through_view,
+    scene_bounds, see_through_objects, see_through_view, slab_objects,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
@@ -37,7 +37,7 @@ use wgpu::util::DeviceExt;
 
 use crate::capsule::GpuCapsule;
 use crate::context::{GpuContext, GpuError};
-use crate::heuristic::compute_pipeline;
+use crate::heuristic::{HeuristicPasses, compute_pipeline};
 use crate::lighting::LightingPass;
 use crate::raster::RasterPass;
 use crate::readback::read_texture_layer_bytes;
@@ -53,8 +53,9 @@ pub const SHADOW_VIEW_WGSL: &str = include_str!("shaders/shadow_view.wgsl");
 pub const SHADOW_DEPTH_WGSL: &str = include_str!("shaders/shadow_depth.wgsl");
 /// WGSL of the probe faces' distance pass (the constants header is prepended).
 pub const PROBE_DISTANCE_WGSL: &str = include_str!("shaders/probe_distance.wgsl");
-/// WGSL of the lookup pass (common/*.wgsl is prepended).
-pub const FALLBACK_WGSL: &str = include_str!("shaders/fallback.wgsl");
+/// WGSL of the lookup pass after the blend's eq. 4–6 (`blend_equations.wgsl`: the see-through
+/// layer's texels are composed with their own fallback terms; common/*.wgsl is prepended).
+pub const FALLBACK_WGSL: &str = concat!(include_str!("shaders/blend_equations.wgsl"), "\n", include_str!("shaders/fallback.wgsl"));
 
 /// A light's maps in `ShadowLightGpu.kind` (fallback.wgsl).
 pub const SHADOW_NONE: u32 = 0;
@@ -102,7 +103,8 @@ pub struct GpuProbe {
     /// w = 1: box-projected against `[box_min, box_max]`.
     pub box_min: [f32; 4],
     pub box_max: [f32; 4],
-    /// Rendered (0/1), first layer of its six faces, -, -.
+    /// Rendered (0/1), first layer of its six faces, see-through object (0/1), closed slab (0/1:
+    /// `slab_objects`, its refraction looked up along the incident direction).
     pub info: [u32; 4],
 }
 
@@ -342,8 +344,10 @@ impl FallbackGpu {
         // Probes: six layers per planned object.
         let mut plans = vec![None; s.objects.len()];
         let mut probe_data = vec![GpuProbe::zeroed(); s.objects.len().max(1)];
-        for (data, &see) in probe_data.iter_mut().zip(&see_through_objects) {
+        let slabs = slab_objects(prepared);
+        for ((data, &see), &slab) in probe_data.iter_mut().zip(&see_through_objects).zip(&slabs) {
             data.info[2] = u32::from(see);
+            data.info[3] = u32::from(slab);
         }
         let mut layers = 0u32;
         for plan in plan_probes(prepared, &scene_bounds(prepared, false)) {
@@ -353,7 +357,7 @@ impl FallbackGpu {
                 centre: plan.centre.extend(plan.far).to_array(),
                 box_min: b.min.extend(if plan.parallax_box.is_some() { 1.0 } else { 0.0 }).to_array(),
                 box_max: b.max.extend(0.0).to_array(),
-                info: [0, layers, u32::from(see_through_objects[o]), 0],
+                info: [0, layers, u32::from(see_through_objects[o]), u32::from(slabs[o])],
             };
             plans[o] = Some((plan, layers));
             layers += 6;
@@ -412,6 +416,15 @@ impl FallbackGpu {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
 
+        let sampled = device.limits().max_sampled_textures_per_shader_stage;
+        if sampled < LOOKUP_SAMPLED_TEXTURES {
+            return Err(GpuError::Unsupported {
+                adapter: ctx.summary.name.clone(),
+                why: format!(
+                    "the fallbacks' lookup pass samples {LOOKUP_SAMPLED_TEXTURES} textures, the device allows {sampled} per shader stage (--fallback none does without)"
+                ),
+            });
+        }
         let (depth_pipeline, disc_pipeline, depth_layout) = depth_pipelines(device, scene);
         let (lookup_pipeline, lookup_layout) = lookup_pipeline(device, scene);
         Ok(Self {
@@ -638,9 +651,12 @@ impl FallbackGpu {
     /// (`hybrid_core::fallback::SeeThrough`), when a planar refractive object is in `needed`
     /// (per object: has untraced pixels): the widened view (`see_through_view`) rasterized
     /// without those objects' meshes (textures at level 0) and lit, in its own submission (the
-    /// frame uniforms hold its camera), every frame it is needed. Writes the lookups' params
-    /// (the layer's view, or none). Returns whether it was rendered; the caller must write the
-    /// frame's own uniforms again then.
+    /// frame uniforms hold its camera), every frame it is needed. Its texels are shaded with
+    /// their own fallbacks, so `counter` (the heuristic's count pass, whose counts the frame has
+    /// already read) counts the layer's pixels per object id in that submission, read back: the
+    /// objects that show in it need probes too, as on the CPU. Writes the lookups' params (the
+    /// layer's view, or none). Returns those counts when the layer was rendered (waits for the
+    /// GPU then); the caller must write the frame's own uniforms again then.
     #[allow(clippy::too_many_arguments)]
     pub fn render_see_through(
         &mut self,
@@ -649,12 +665,14 @@ impl FallbackGpu {
         scene: &Scene,
         raster: &RasterPass,
         lighting: &LightingPass,
+        counter: &HeuristicPasses,
         camera: &Camera,
         (width, height): (u32, u32),
         needed: &[bool],
-    ) -> bool {
+    ) -> Result<Option<Vec<u64>>, GpuError> {
         let need = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
         self.params_data.see_through = u32::from(need);
+        let mut counts = None;
         if need {
             let (view, w, h) = see_through_view(camera, width, height);
             if (self.see_through_targets.width, self.see_through_targets.height) != (w, h) {
@@ -666,14 +684,16 @@ impl FallbackGpu {
             let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fallback: see-through") });
             raster.encode_triangles(&mut enc, scene_gpu, targets, true, &self.see_through_ranges, &mut timer);
             lighting.encode(&mut enc, scene_gpu, targets, &mut timer);
+            counter.encode_count(&mut enc, targets, &mut timer);
             ctx.queue.submit([enc.finish()]);
+            counts = Some(counter.read_counts(ctx)?);
             self.see_through_renders += 1;
             self.params_data.see_width = w;
             self.params_data.see_height = h;
             self.params_data.see_view_proj = view.view_projection(w as f32 / h.max(1) as f32).to_cols_array_2d();
         }
         ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&self.params_data));
-        need
+        Ok(counts)
     }
 
     /// Makes the three fallback targets for a `width` × `height` frame (kept while the size stays).
@@ -775,6 +795,9 @@ impl FallbackGpu {
             texture(19, &self.see_through_targets.normal.view),
             texture(20, &self.see_through_targets.object_id.view),
             texture(21, &self.see_through_targets.lighting.view),
+            texture(22, &self.see_through_targets.diffuse.view),
+            texture(23, &self.see_through_targets.specular.view),
+            texture(24, &self.see_through_targets.optical.view),
         ];
         let entries: Vec<wgpu::BindGroupEntry> =
             resources.into_iter().map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }).collect();
@@ -905,7 +928,12 @@ fn triangle_runs(mesh_triangles: &[(u32, Range<u32>)], keep: impl Fn(u32) -> boo
     ranges
 }
 
-/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–21).
+/// Sampled textures the lookup pass binds (fallback.wgsl's group 1: the frame's G-buffer and
+/// mask, the two shadow-map arrays, the probe faces, the see-through layer's seven targets);
+/// `FallbackGpu::new` refuses a device that allows fewer per shader stage (wgpu's default is 16).
+pub const LOOKUP_SAMPLED_TEXTURES: u32 = 17;
+
+/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–24).
 fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
     let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
         binding,
@@ -946,6 +974,9 @@ fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePip
         entry(19, texture(float, d2)),
         entry(20, texture(wgpu::TextureSampleType::Uint, d2)),
         entry(21, texture(float, d2)),
+        entry(22, texture(float, d2)),
+        entry(23, texture(float, d2)),
+        entry(24, texture(float, d2)),
     ];
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("fallback.lookup"), entries: &entries });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -413,8 +413,9 @@ impl<'s> GpuRenderer<'s> {
         if mode == Mode::RtOnly { Fallback::None } else { self.fallback }
     }
 
-    /// Stage 3b (issue 18): the probes of objects with untraced pixels (`untraced`, per object)
-    /// that have none yet (their own submissions, now), the shadow maps whose views changed and
+    /// Stage 3b (issue 18): the see-through layer where a planar refractive object has untraced
+    /// pixels, then the probes of objects with untraced pixels (`untraced`, per object) or shown
+    /// in that layer that have none yet (their own submissions, now), the shadow maps whose views changed and
     /// the lookups into the fallback targets (recorded into `enc`). Nothing when `fallback` is
     /// none. Returns what was rendered and the probes' host ms.
     fn fallback_stage(
@@ -436,27 +437,32 @@ impl<'s> GpuRenderer<'s> {
         }
         let Some(fb) = self.fallback_gpu.as_mut() else { return Ok((renders, 0.0)) };
         fb.ensure_outputs(targets.width, targets.height);
-        let needed: Vec<bool> = untraced.iter().map(|&u| u > 0).collect();
+        let mut needed: Vec<bool> = untraced.iter().map(|&u| u > 0).collect();
         let mut to_render = Vec::new();
         let mut probe_ms = 0.0;
         if needed.iter().any(|&x| x) {
             let start = Instant::now();
-            // As the CPU: the spheres appear in the probes when they take part in the trace stage.
-            let capsule = self.capsule.as_ref().filter(|_| self.spheres_in_trace).map(|c| (c, &self.spheres));
-            renders.probes = fb.render_probes(&self.ctx, &self.gpu_scene, self.scene, &self.raster, &self.lighting, capsule, &needed);
-            // The see-through layer (planar refractive objects with untraced pixels), every frame.
+            // The see-through layer (planar refractive objects with untraced pixels), every frame,
+            // before the probes: the objects that show in it are shaded with their probes too.
             let see_through = fb.render_see_through(
                 &self.ctx,
                 &self.gpu_scene,
                 self.scene,
                 &self.raster,
                 &self.lighting,
+                &self.heuristic_passes,
                 camera,
                 (targets.width, targets.height),
                 &needed,
-            );
-            if renders.probes > 0 || see_through {
-                // The probes' faces and the see-through layer wrote their cameras into the frame
+            )?;
+            for (need, &count) in needed.iter_mut().zip(see_through.iter().flatten()) {
+                *need |= count > 0;
+            }
+            // As the CPU: the spheres appear in the probes when they take part in the trace stage.
+            let capsule = self.capsule.as_ref().filter(|_| self.spheres_in_trace).map(|c| (c, &self.spheres));
+            renders.probes = fb.render_probes(&self.ctx, &self.gpu_scene, self.scene, &self.raster, &self.lighting, capsule, &needed);
+            if renders.probes > 0 || see_through.is_some() {
+                // The see-through layer and the probes' faces wrote their cameras into the frame
                 // uniforms.
                 self.gpu_scene.write_uniforms(&self.ctx, camera, targets.width, targets.height, &self.scene.environment);
             }

@@ -1,8 +1,9 @@
 // fallback.wgsl — stage 3b's lookups (issue 18): the WGSL twin of
 // hybrid_core::fallback::FallbackScene::pixel for every covered polygon pixel the trace stage
 // left out (mask < MASK_EPSILON), from the shadow maps, the objects' probes and (planar
-// refractive objects) the see-through layer; shadow 1, reflection and refraction 0 elsewhere.
-// common/*.wgsl and shadow_view.wgsl are prepended.
+// refractive objects) the see-through layer, whose texel is shaded with its own fallback terms
+// (FallbackScene::see_through_texel); shadow 1, reflection and refraction 0 elsewhere.
+// common/*.wgsl, shadow_view.wgsl and blend_equations.wgsl are prepended.
 
 // Per light (GPU light order = hybrid_core::shading::lights order): its views.
 struct ShadowLightGpu {
@@ -17,7 +18,9 @@ struct ProbeGpu {
     centre: vec4<f32>,  // w = the far plane (the distance where nothing was seen)
     box_min: vec4<f32>, // w = 1: box-projected against [box_min, box_max]
     box_max: vec4<f32>,
-    info: vec4<u32>,    // rendered, first layer (+ face), see-through object (0/1), -
+    // Rendered, first layer (+ face), see-through object (0/1), closed slab (0/1: its
+    // refraction leaves along the incident direction; hybrid_core::fallback::slab_objects).
+    info: vec4<u32>,
 }
 
 struct FallbackParams {
@@ -54,11 +57,14 @@ struct FallbackParams {
 // Per probe texel (layer after layer, row-major): the distance from the centre to the surface seen.
 @group(1) @binding(17) var<storage, read> probe_distances: array<f32>;
 // The see-through layer: the frame's view widened, rasterized without the planar refractive
-// objects, lit.
+// objects, lit; its surfaces (as g_*) for their own fallback terms.
 @group(1) @binding(18) var st_position: texture_2d<f32>;
 @group(1) @binding(19) var st_normal: texture_2d<f32>;
 @group(1) @binding(20) var st_object_id: texture_2d<u32>;
 @group(1) @binding(21) var st_color: texture_2d<f32>;
+@group(1) @binding(22) var st_diffuse: texture_2d<f32>;
+@group(1) @binding(23) var st_specular: texture_2d<f32>;
+@group(1) @binding(24) var st_optical: texture_2d<f32>;
 
 // ShadowMap::lit: 1 where texel (x, y), clamped to the map, is no nearer than z_ref.
 fn lit(v: ShadowViewGpu, x: i32, y: i32, z_ref: f32) -> f32 {
@@ -312,14 +318,14 @@ fn see_pixel(x: vec3<f32>) -> vec2<i32> {
     return min(vec2<i32>(uv * vec2<f32>(size)), size - vec2<i32>(1));
 }
 
-// SeeThrough::refraction: the layer's colour along unit t from p (w = 1), or w = 0 where
-// nothing lies behind p (the probe answers then). The distance starts as the surface's behind
-// p and is refined SEE_THROUGH_STEPS times against the tangent plane of the surface where the
-// point lands; a point that leaves the layer keeps the last pixel in it.
-fn see_through_refraction(p: vec3<f32>, t: vec3<f32>) -> vec4<f32> {
+// SeeThrough::texel_along: the layer texel the refraction along unit t from p meets, or x = -1
+// where nothing lies behind p (the probe answers then). The distance starts as the surface's
+// behind p and is refined SEE_THROUGH_STEPS times against the tangent plane of the surface where
+// the point lands; a point that leaves the layer keeps the last pixel in it.
+fn see_through_texel(p: vec3<f32>, t: vec3<f32>) -> vec2<i32> {
     let i = see_pixel(p);
     if i.x < 0 || textureLoad(st_object_id, i, 0).x == NO_OBJECT {
-        return vec4<f32>(0.0);
+        return vec2<i32>(-1);
     }
     var d = distance(textureLoad(st_position, i, 0).xyz, p);
     var j = i;
@@ -348,7 +354,104 @@ fn see_through_refraction(p: vec3<f32>, t: vec3<f32>) -> vec4<f32> {
     if last.x >= 0 {
         j = last;
     }
-    return vec4<f32>(textureLoad(st_color, j, 0).xyz, 1.0);
+    return j;
+}
+
+// GBuffer::surface: the surface a G-buffer's targets hold at px.
+fn surface_at(
+    position: texture_2d<f32>,
+    normal: texture_2d<f32>,
+    diffuse: texture_2d<f32>,
+    specular: texture_2d<f32>,
+    optical: texture_2d<f32>,
+    px: vec2<i32>,
+) -> Surface {
+    let d = textureLoad(diffuse, px, 0);
+    let sp = textureLoad(specular, px, 0);
+    let o = textureLoad(optical, px, 0);
+    var s: Surface;
+    s.position = textureLoad(position, px, 0).xyz;
+    s.normal = textureLoad(normal, px, 0).xyz;
+    s.diffuse = d.xyz;
+    s.opacity = d.w;
+    s.specular = sp.xyz;
+    s.shininess = sp.w;
+    s.reflectivity = o.x;
+    s.ior = o.y;
+    return s;
+}
+
+// A surface's fallback terms, and where its refraction looks through the see-through layer, the
+// layer texel it lands on.
+struct Terms {
+    shadow: vec3<f32>,
+    reflection: vec3<f32>,
+    // Left 0 where `texel` is set: the caller shades that texel (layer_texel; WGSL has no
+    // recursion).
+    refraction: vec3<f32>,
+    // The see-through layer's texel the refraction meets; x = -1 where it does not look through
+    // the layer.
+    texel: vec2<i32>,
+}
+
+// FallbackScene::terms of object id's surface s: shadows from the maps, reflection and
+// refraction from the object's probe (or the sky); with `through`, a planar refractive object's
+// refraction through the see-through layer (the frame's pixels; never the layer's own texels).
+fn surface_terms(id: u32, s: Surface, through: bool) -> Terms {
+    var t = Terms(vec3<f32>(1.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<i32>(-1));
+    let view = view_dir(s.position);
+    let incident = -view;
+    let view_distance = dot(s.position - frame.camera_position.xyz, frame.camera_forward.xyz);
+
+    let unlit = all(s.diffuse == vec3<f32>(0.0)) && all(s.specular == vec3<f32>(0.0));
+    if !unlit {
+        let light_count = min(frame.counts.x, arrayLength(&shadow_lights));
+        for (var i = 0u; i < light_count; i++) {
+            let sl = shadow_lights[i];
+            if sl.view_count == 0u {
+                continue;
+            }
+            let inc = light_incident(lights[i], s.position);
+            let n = facing(s.normal, view);
+            if all(inc.radiance == vec3<f32>(0.0)) || dot(n, inc.dir) <= 0.0 {
+                continue;
+            }
+            let v = shadow_views[view_for(sl, s.position, view_distance, lights[i].position.xyz)];
+            let vis = visibility(v, s.position, n, inc.dir);
+            if vis < 1.0 {
+                t.shadow -= blinn_phong_incident(inc.dir, inc.radiance, s, view) * (1.0 - vis);
+            }
+        }
+    }
+
+    if s.reflectivity > 0.0 {
+        t.reflection = look(id, s.position, normalize_or(reflect_dir(incident, s.normal), vec3<f32>(0.0)));
+    }
+    if s.opacity < 1.0 {
+        let dir = refract_or_reflect(incident, s.normal, frame.env_ambient.w, s.ior).xyz;
+        if through && params.see_through != 0u && id < arrayLength(&probes) && probes[id].info.z != 0u {
+            // Through a slab: bent in, bent back out by the parallel face behind.
+            t.texel = see_through_texel(s.position, select(dir, incident, probes[id].info.w != 0u));
+        }
+        if t.texel.x < 0 {
+            t.refraction = look(id, s.position, dir);
+        }
+    }
+    return t;
+}
+
+// FallbackScene::see_through_texel: layer texel j as the blend would show it with fallbacks:
+// its lighting through eq. 4–6 with its own fallback terms (its probe, not the layer again);
+// the lighting alone where it holds no polygon surface.
+fn layer_texel(j: vec2<i32>) -> vec3<f32> {
+    let lit = textureLoad(st_color, j, 0).xyz;
+    let id = textureLoad(st_object_id, j, 0).x;
+    let s = surface_at(st_position, st_normal, st_diffuse, st_specular, st_optical, j);
+    if id == NO_OBJECT || id == RT_SCENE_OBJECT || dot(s.normal, s.normal) <= 0.0 {
+        return lit;
+    }
+    let t = surface_terms(id, s, false);
+    return blend_pixel(lit, t.shadow, t.reflection, t.refraction, textureLoad(st_optical, j, 0).xyz, 1.0);
 }
 
 @compute @workgroup_size(8, 8)
@@ -358,67 +461,17 @@ fn cs_fallback(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let px = vec2<i32>(gid.xy);
-    var shadow = vec3<f32>(1.0);
-    var reflection = vec3<f32>(0.0);
-    var refraction = vec3<f32>(0.0);
+    var t = Terms(vec3<f32>(1.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<i32>(-1));
     let id = textureLoad(g_object_id, px, 0).x;
     let normal = textureLoad(g_normal, px, 0).xyz;
     let untraced = textureLoad(g_mask, px, 0).x < MASK_EPSILON && id != NO_OBJECT && id != RT_SCENE_OBJECT;
     if untraced && dot(normal, normal) > 0.0 {
-        let d = textureLoad(g_diffuse, px, 0);
-        let sp = textureLoad(g_specular, px, 0);
-        let o = textureLoad(g_optical, px, 0);
-        var s: Surface;
-        s.position = textureLoad(g_position, px, 0).xyz;
-        s.normal = normal;
-        s.diffuse = d.xyz;
-        s.opacity = d.w;
-        s.specular = sp.xyz;
-        s.shininess = sp.w;
-        s.reflectivity = o.x;
-        s.ior = o.y;
-        let view = view_dir(s.position);
-        let incident = -view;
-        let view_distance = dot(s.position - frame.camera_position.xyz, frame.camera_forward.xyz);
-
-        let unlit = all(s.diffuse == vec3<f32>(0.0)) && all(s.specular == vec3<f32>(0.0));
-        if !unlit {
-            let light_count = min(frame.counts.x, arrayLength(&shadow_lights));
-            for (var i = 0u; i < light_count; i++) {
-                let sl = shadow_lights[i];
-                if sl.view_count == 0u {
-                    continue;
-                }
-                let inc = light_incident(lights[i], s.position);
-                let n = facing(s.normal, view);
-                if all(inc.radiance == vec3<f32>(0.0)) || dot(n, inc.dir) <= 0.0 {
-                    continue;
-                }
-                let v = shadow_views[view_for(sl, s.position, view_distance, lights[i].position.xyz)];
-                let vis = visibility(v, s.position, n, inc.dir);
-                if vis < 1.0 {
-                    shadow -= blinn_phong_incident(inc.dir, inc.radiance, s, view) * (1.0 - vis);
-                }
-            }
-        }
-
-        if s.reflectivity > 0.0 {
-            reflection = look(id, s.position, normalize_or(reflect_dir(incident, s.normal), vec3<f32>(0.0)));
-        }
-        if s.opacity < 1.0 {
-            let dir = refract_or_reflect(incident, s.normal, frame.env_ambient.w, s.ior).xyz;
-            var through = vec4<f32>(0.0);
-            if params.see_through != 0u && id < arrayLength(&probes) && probes[id].info.z != 0u {
-                through = see_through_refraction(s.position, dir);
-            }
-            if through.w > 0.0 {
-                refraction = through.xyz;
-            } else {
-                refraction = look(id, s.position, dir);
-            }
+        t = surface_terms(id, surface_at(g_position, g_normal, g_diffuse, g_specular, g_optical, px), true);
+        if t.texel.x >= 0 {
+            t.refraction = layer_texel(t.texel);
         }
     }
-    textureStore(out_shadow, px, vec4<f32>(shadow, 1.0));
-    textureStore(out_reflection, px, vec4<f32>(reflection, 1.0));
-    textureStore(out_refraction, px, vec4<f32>(refraction, 1.0));
+    textureStore(out_shadow, px, vec4<f32>(t.shadow, 1.0));
+    textureStore(out_reflection, px, vec4<f32>(t.reflection, 1.0));
+    textureStore(out_refraction, px, vec4<f32>(t.refraction, 1.0));
 }
