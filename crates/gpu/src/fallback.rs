@@ -7,7 +7,10 @@
 //! raster and deferred-lighting passes, six faces per reflective or refractive object, once,
 //! when the object first has untraced pixels. Planar refractive objects refract through the
 //! see-through layer (`SeeThrough`): the frame's view widened, rendered by the same raster and
-//! lighting passes without them into its own targets, every frame one has untraced pixels.
+//! lighting passes without them into its own targets, every frame one has untraced pixels,
+//! before the probes (the objects it shows get probes: its texels are shaded with their own
+//! fallbacks, `FallbackScene::see_through_texel`); closed slabs (`slab_objects`) look it up
+//! along the incident direction.
 //! Probe faces and that layer sample textures at level 0 (`RasterPass::encode_triangles`). One
 //! compute pass (`shaders/fallback.wgsl`, the twin of `FallbackScene::pixel`) then writes the
 //! three fallback targets.
