@@ -1012,6 +1012,23 @@ mod tests {
         }
     }
 
+    /// The sampled textures the lookup pass declares (every stage's textures, group 0's
+    /// included) are the number `FallbackGpu::new` checks against the device's limit.
+    #[test]
+    fn lookup_sampled_textures_are_counted() {
+        let source = shaders::with_common(&format!("{SHADOW_VIEW_WGSL}\n{FALLBACK_WGSL}"));
+        let module = naga::front::wgsl::parse_str(&source).expect("fallback.wgsl parses");
+        let sampled = module
+            .global_variables
+            .iter()
+            .filter(|(_, v)| match module.types[v.ty].inner {
+                naga::TypeInner::Image { class, .. } => !matches!(class, naga::ImageClass::Storage { .. }),
+                _ => false,
+            })
+            .count();
+        assert_eq!(sampled as u32, LOOKUP_SAMPLED_TEXTURES);
+    }
+
     #[test]
     fn shader_constants_match_rust() {
         assert!(FALLBACK_WGSL.contains(&format!("@workgroup_size({GROUP}, {GROUP})")));
