@@ -655,11 +655,13 @@ impl FallbackGpu {
     /// (per object: has untraced pixels): the widened view (`see_through_view`) rasterized
     /// without those objects' meshes (textures at level 0) and lit, in its own submission (the
     /// frame uniforms hold its camera), every frame it is needed. Its texels are shaded with
-    /// their own fallbacks, so `counter` (the heuristic's count pass, whose counts the frame has
-    /// already read) counts the layer's pixels per object id in that submission, read back: the
-    /// objects that show in it need probes too, as on the CPU. Writes the lookups' params (the
-    /// layer's view, or none). Returns those counts when the layer was rendered (waits for the
-    /// GPU then); the caller must write the frame's own uniforms again then.
+    /// their own fallbacks, so the objects that show in it need probes too, as on the CPU: while
+    /// some object's planned probe is not rendered yet, `counter` (the heuristic's count pass,
+    /// whose counts the frame has already read) counts the layer's pixels per object id in that
+    /// submission, read back (the host waits for the GPU then). Writes the lookups' params (the
+    /// layer's view, or none). Returns, when the layer was rendered, per object whether it shows
+    /// in the layer and still lacks its probe; the caller must write the frame's own uniforms
+    /// again then.
     #[allow(clippy::too_many_arguments)]
     pub fn render_see_through(
         &mut self,
@@ -672,11 +674,14 @@ impl FallbackGpu {
         camera: &Camera,
         (width, height): (u32, u32),
         needed: &[bool],
-    ) -> Result<Option<Vec<u64>>, GpuError> {
+    ) -> Result<Option<Vec<bool>>, GpuError> {
         let need = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
         self.params_data.see_through = u32::from(need);
-        let mut counts = None;
+        let mut shown = None;
         if need {
+            // Per object: a planned probe not rendered yet; with none, nothing is worth counting.
+            let missing: Vec<bool> = self.plans.iter().zip(&self.probe_rendered).map(|(p, &done)| p.is_some() && !done).collect();
+            let count = missing.iter().any(|&m| m);
             let (view, w, h) = see_through_view(camera, width, height);
             if (self.see_through_targets.width, self.see_through_targets.height) != (w, h) {
                 self.see_through_targets = FrameTargets::raster_layer(&ctx.device, w, h);
@@ -687,16 +692,22 @@ impl FallbackGpu {
             let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fallback: see-through") });
             raster.encode_triangles(&mut enc, scene_gpu, targets, true, &self.see_through_ranges, &mut timer);
             lighting.encode(&mut enc, scene_gpu, targets, &mut timer);
-            counter.encode_count(&mut enc, targets, &mut timer);
+            if count {
+                counter.encode_count(&mut enc, targets, &mut timer);
+            }
             ctx.queue.submit([enc.finish()]);
-            counts = Some(counter.read_counts(ctx)?);
+            shown = Some(if count {
+                counter.read_counts(ctx)?.into_iter().zip(missing).map(|(pixels, m)| pixels > 0 && m).collect()
+            } else {
+                missing // all false
+            });
             self.see_through_renders += 1;
             self.params_data.see_width = w;
             self.params_data.see_height = h;
             self.params_data.see_view_proj = view.view_projection(w as f32 / h.max(1) as f32).to_cols_array_2d();
         }
         ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&self.params_data));
-        Ok(counts)
+        Ok(shown)
     }
 
     /// Makes the three fallback targets for a `width` × `height` frame (kept while the size stays).

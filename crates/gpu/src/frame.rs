@@ -455,8 +455,8 @@ impl<'s> GpuRenderer<'s> {
                 (targets.width, targets.height),
                 &needed,
             )?;
-            for (need, &count) in needed.iter_mut().zip(see_through.iter().flatten()) {
-                *need |= count > 0;
+            for (need, &shown) in needed.iter_mut().zip(see_through.iter().flatten()) {
+                *need |= shown;
             }
             // As the CPU: the spheres appear in the probes when they take part in the trace stage.
             let capsule = self.capsule.as_ref().filter(|_| self.spheres_in_trace).map(|c| (c, &self.spheres));
