@@ -10,8 +10,8 @@
 use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
 use hybrid_core::fallback::{
-    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, SeeThrough, ShadowMap, ShadowView, caster_meshes, plan_light_views,
-    plan_probes, project, scene_bounds, see_through_objects, see_through_view, slab_objects,
+    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, Refractor, SeeThrough, ShadowMap, ShadowView, caster_meshes,
+    plan_light_views, plan_probes, project, refractors, scene_bounds, see_through_objects, see_through_view,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
@@ -38,8 +38,8 @@ pub struct FallbackCache {
     /// layer; per mesh: the meshes that layer draws (all the others).
     see_through_objects: Vec<bool>,
     see_through_meshes: Vec<bool>,
-    /// Per object: closed slabs (`slab_objects`), seen through unbent.
-    slab_objects: Vec<bool>,
+    /// Per object: what a refraction ray leaves it by (`refractors`).
+    refractors: Vec<Option<Refractor>>,
     bounds: Aabb,
     /// Shadow maps rendered per light (cascades, spot maps, cube faces), since the cache was made.
     pub shadow_map_renders: Vec<u64>,
@@ -52,7 +52,8 @@ impl FallbackCache {
         let scene = prepared.scene;
         let bounds = scene_bounds(prepared, spheres_cast);
         let casters = caster_meshes(prepared);
-        let see_through_objects = see_through_objects(prepared);
+        let refractors = refractors(prepared);
+        let see_through_objects = see_through_objects(prepared, &refractors);
         let see_through_meshes = prepared.meshes.iter().map(|m| !see_through_objects[m.object as usize]).collect();
         let mut plans = vec![None; scene.objects.len()];
         for p in plan_probes(prepared, &scene_bounds(prepared, false)) {
@@ -67,7 +68,7 @@ impl FallbackCache {
             casters,
             see_through_objects,
             see_through_meshes,
-            slab_objects: slab_objects(prepared),
+            refractors,
             bounds,
             shadow_map_renders: vec![0; n_lights],
             probe_renders: 0,
@@ -178,7 +179,7 @@ impl FallbackCache {
             camera,
             pcf_radius: self.settings.pcf_radius,
             see_through_objects: &self.see_through_objects,
-            slab_objects: &self.slab_objects,
+            refractors: &self.refractors,
             see_through: layer.as_ref().map(|(g, lit, view)| SeeThrough {
                 view_proj: view.view_projection(g.width as f32 / g.height.max(1) as f32),
                 layer: g,
