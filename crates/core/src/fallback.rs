@@ -506,7 +506,7 @@ pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
 /// along the ray at quadratically spaced distances up to the probe's far plane, then a
 /// bisection between the last step in front of the seen surface and the first behind it. More
 /// steps find thinner surfaces and land closer, at the cost of a distance lookup each.
-pub const PROBE_MARCH_STEPS: u32 = 16;
+pub const PROBE_MARCH_STEPS: u32 = 8;
 pub const PROBE_REFINE_STEPS: u32 = 5;
 
 /// A rendered probe: six faces of `size`², face after face in [`CUBE_FACES`] order, row-major,

@@ -45,6 +45,17 @@ pub struct FallbackCache {
     pub shadow_map_renders: Vec<u64>,
     /// Probes rendered since the cache was made.
     pub probe_renders: u64,
+    /// The last see-through layer, kept while the view stays the same (scenes are static).
+    see_through: Option<SeeThroughLayer>,
+    /// See-through layers rendered since the cache was made.
+    pub see_through_renders: u64,
+}
+
+/// A see-through layer: the widened view's camera, its G-buffer and lighting.
+struct SeeThroughLayer {
+    view: Camera,
+    gbuffer: GBuffer,
+    lit: Vec<Vec3>,
 }
 
 impl FallbackCache {
@@ -72,6 +83,8 @@ impl FallbackCache {
             bounds,
             shadow_map_renders: vec![0; n_lights],
             probe_renders: 0,
+            see_through: None,
+            see_through_renders: 0,
         }
     }
 
@@ -140,17 +153,22 @@ impl FallbackCache {
             self.maps[lv.light] = Some(LightShadowMaps { light: lv.light, kind: lv.kind, maps });
         }
 
-        // The see-through layer, when a planar refractive object has untraced pixels: the view
-        // rasterized without those objects, lit. Its texels are shaded with fallbacks too, so
-        // what shows in it needs probes as well.
+        // The see-through layer, when a planar or convex refractive object has untraced pixels:
+        // the view rasterized without those objects, lit; kept while the view stays the same.
+        // Its texels are shaded with their probes, so what shows in it needs probes as well.
         let see_through_needed = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
-        let layer = see_through_needed.then(|| {
+        if see_through_needed {
             let (view, w, h) = see_through_view(camera, gbuffer.width, gbuffer.height);
-            let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
-            let lit = lighting::deferred_lighting(&g, scene, &view);
-            (g, lit, view)
-        });
-        if let Some((g, _, _)) = &layer {
+            let same = self.see_through.as_ref().is_some_and(|l| l.view == view && (l.gbuffer.width, l.gbuffer.height) == (w, h));
+            if !same {
+                let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
+                let lit = lighting::deferred_lighting(&g, scene, &view);
+                self.see_through = Some(SeeThroughLayer { view, gbuffer: g, lit });
+                self.see_through_renders += 1;
+            }
+        }
+        let layer = self.see_through.as_ref().filter(|_| see_through_needed);
+        if let Some(SeeThroughLayer { gbuffer: g, .. }) = layer {
             for &id in &g.object_id {
                 if let Some(x) = needed.get_mut(id as usize) {
                     *x = true;
@@ -180,10 +198,10 @@ impl FallbackCache {
             pcf_radius: self.settings.pcf_radius,
             see_through_objects: &self.see_through_objects,
             refractors: &self.refractors,
-            see_through: layer.as_ref().map(|(g, lit, view)| SeeThrough {
-                view_proj: view.view_projection(g.width as f32 / g.height.max(1) as f32),
-                layer: g,
-                color: lit,
+            see_through: layer.map(|l| SeeThrough {
+                view_proj: l.view.view_projection(l.gbuffer.width as f32 / l.gbuffer.height.max(1) as f32),
+                layer: &l.gbuffer,
+                color: &l.lit,
             }),
         };
         const CHUNK: usize = 256;

@@ -387,4 +387,13 @@ intensity = 1.0
     let [pane, cube, ball] = flips[..] else { unreachable!() };
     assert!(pane <= 0.02 && cube <= 0.25 && ball <= 0.1, "fallback refraction vs rays, mean FLIP: pane {pane}, cube {cube}, ball {ball}");
     assert!(final_flip <= 0.03, "final images: mean FLIP {final_flip}");
+    // The see-through layer is kept while the view stays the same (the traced frame needed none).
+    let renders = |r: &CpuRenderer| r.fallback_cache().unwrap().see_through_renders;
+    assert_eq!(renders(&r), 1);
+    let again = render(&mut r, &scene.camera, Mode::Raster, w, h);
+    assert_eq!(renders(&r), 1);
+    assert_eq!(again.buffers.refraction_fallback, raster.buffers.refraction_fallback);
+    let moved = Camera { position: scene.camera.position + Vec3::new(0.2, 0.0, 0.0), ..scene.camera };
+    render(&mut r, &moved, Mode::Raster, w, h);
+    assert_eq!(renders(&r), 2);
 }
