@@ -376,7 +376,7 @@ pub fn project(view_proj: &Mat4, p: Vec3) -> Option<(Vec2, f32)> {
 
 impl ShadowMap {
     /// 1 where texel `(x, y)` (clamped to the map) is no nearer than `z_ref`, else 0.
-    #[inline]
+    #[inline(always)]
     fn lit(&self, x: i32, y: i32, z_ref: f32) -> f32 {
         let n = self.view.size as i32;
         let (x, y) = (x.clamp(0, n - 1), y.clamp(0, n - 1));
@@ -385,7 +385,7 @@ impl ShadowMap {
 
     /// A bilinear comparison (hardware-style PCF): the four texels around `uv` compared with
     /// `z_ref`, weighted by their bilinear weights.
-    #[inline]
+    #[inline(always)]
     pub fn compare_bilinear(&self, uv: Vec2, z_ref: f32) -> f32 {
         let n = self.view.size as f32;
         let t = uv * n - Vec2::splat(0.5);
@@ -400,6 +400,7 @@ impl ShadowMap {
     /// Visibility (0 shadowed … 1 lit) of surface point `p` with normal `n` (facing the light),
     /// `to_light` the unit direction towards the light: normal offset, slope-scaled bias, PCF.
     /// Points outside the map are lit.
+    #[inline(always)]
     pub fn visibility(&self, p: Vec3, n: Vec3, to_light: Vec3, pcf_radius: u32) -> f32 {
         let v = &self.view;
         let m = &v.view_proj;
@@ -560,7 +561,7 @@ impl Probe {
     /// where it first goes behind the surface the probe saw (|y| > D(y), y = p + t·dir − centre,
     /// D the distance the probe saw along y), marched in [`PROBE_MARCH_STEPS`] and refined in
     /// [`PROBE_REFINE_STEPS`]; `dir` itself when it never does (it leaves towards the sky).
-    #[inline]
+    #[inline(always)]
     pub fn lookup_direction(&self, p: Vec3, dir: Vec3) -> Vec3 {
         match self.plan.parallax_box {
             Some(b) => {
@@ -600,6 +601,7 @@ impl Probe {
     }
 
     /// The probe's colour for a ray from `p` along unit `dir` (bilinear within the face).
+    #[inline(always)]
     pub fn sample(&self, p: Vec3, dir: Vec3) -> Vec3 {
         let d = self.lookup_direction(p, dir);
         if d == Vec3::ZERO {
@@ -987,6 +989,7 @@ impl FallbackScene<'_> {
     /// `(shadow, reflection, refraction)`, the same quantities the trace stage writes, from the
     /// shadow maps, the object's probe and (planar refractive objects) the see-through layer
     /// instead of rays.
+    #[inline(always)]
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
         let incident = self.camera.incident_towards(s.position);
         let shadow = self.shadow(s, -incident);
@@ -1018,6 +1021,7 @@ impl FallbackScene<'_> {
 
     /// The shadow term of surface `s` seen along `view` (towards the eye): 1 minus each
     /// light's Blinn–Phong share times its shadow maps' occlusion.
+    #[inline(always)]
     fn shadow(&self, s: &Surface, view: Vec3) -> Vec3 {
         let mut shadow = Vec3::ONE;
         let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
@@ -1025,10 +1029,10 @@ impl FallbackScene<'_> {
             return shadow;
         }
         let view_distance = (s.position - self.camera.position).dot(self.camera.forward());
+        let n = facing(s.normal, view);
         for (k, light) in lights(&self.scene.lights).enumerate() {
             let Some(Some(maps)) = self.shadow_maps.get(k) else { continue };
             let (dir, _dist, radiance) = self.frame_lights.incident_and_distance(k, s.position);
-            let n = facing(s.normal, view);
             if radiance == Vec3::ZERO || n.dot(dir) <= 0.0 {
                 continue;
             }
@@ -1049,6 +1053,7 @@ impl FallbackScene<'_> {
     /// The reflection and refraction terms of object `object`'s surface `s` hit along unit
     /// `incident`: its probe (the sky without one), or for a planar refractive object the
     /// see-through layer when given.
+    #[inline(always)]
     fn reflection_refraction(&self, object: u32, s: &Surface, incident: Vec3, see_through: Option<&SeeThrough>) -> (Vec3, Vec3) {
         let scene = self.scene;
         let probe = self.probes.get(object as usize).copied().flatten();

@@ -207,15 +207,21 @@ impl FallbackCache {
         const CHUNK: usize = 256;
         shadow.par_chunks_mut(CHUNK).zip(reflection.par_chunks_mut(CHUNK)).zip(refraction.par_chunks_mut(CHUNK)).enumerate().for_each(
             |(c, ((s, m), r))| {
-                for k in 0..s.len() {
-                    let i = c * CHUNK + k;
-                    let id = gbuffer.object_id[i];
-                    if gbuffer.mask[i] >= MASK_EPSILON || !is_polygon(id) {
-                        continue;
-                    }
-                    let Some(surface) = gbuffer.surface(i).filter(|s| s.normal.length_squared() > 0.0) else { continue };
-                    (s[k], m[k], r[k]) = fb.pixel(id, &surface);
-                }
+                // Compiled for the machine's widest instruction set (the lookups are inlined).
+                crate::isa::dispatch(
+                    #[inline(always)]
+                    || {
+                        for k in 0..s.len() {
+                            let i = c * CHUNK + k;
+                            let id = gbuffer.object_id[i];
+                            if gbuffer.mask[i] >= MASK_EPSILON || !is_polygon(id) {
+                                continue;
+                            }
+                            let Some(surface) = gbuffer.surface(i).filter(|s| s.normal.length_squared() > 0.0) else { continue };
+                            (s[k], m[k], r[k]) = fb.pixel(id, &surface);
+                        }
+                    },
+                )
             },
         );
         renders
