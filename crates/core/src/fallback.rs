@@ -12,7 +12,7 @@
 //! Conventions: every map is reversed-Z (near 1, far 0, 0 where nothing was drawn), row 0 at the
 //! top, texel `(x, y)` centred at `((x + 0.5)/size, (y + 0.5)/size)` in UV.
 
-use glam::{Mat4, Vec2, Vec3, Vec4Swizzles};
+use glam::{Mat4, Vec2, Vec3, Vec4, Vec4Swizzles};
 use hybrid_scene::{Aabb, Camera, Projection, Scene};
 
 use crate::prepare::PreparedScene;
@@ -376,7 +376,7 @@ pub fn project(view_proj: &Mat4, p: Vec3) -> Option<(Vec2, f32)> {
 
 impl ShadowMap {
     /// 1 where texel `(x, y)` (clamped to the map) is no nearer than `z_ref`, else 0.
-    #[inline]
+    #[inline(always)]
     fn lit(&self, x: i32, y: i32, z_ref: f32) -> f32 {
         let n = self.view.size as i32;
         let (x, y) = (x.clamp(0, n - 1), y.clamp(0, n - 1));
@@ -385,7 +385,7 @@ impl ShadowMap {
 
     /// A bilinear comparison (hardware-style PCF): the four texels around `uv` compared with
     /// `z_ref`, weighted by their bilinear weights.
-    #[inline]
+    #[inline(always)]
     pub fn compare_bilinear(&self, uv: Vec2, z_ref: f32) -> f32 {
         let n = self.view.size as f32;
         let t = uv * n - Vec2::splat(0.5);
@@ -400,6 +400,7 @@ impl ShadowMap {
     /// Visibility (0 shadowed … 1 lit) of surface point `p` with normal `n` (facing the light),
     /// `to_light` the unit direction towards the light: normal offset, slope-scaled bias, PCF.
     /// Points outside the map are lit.
+    #[inline(always)]
     pub fn visibility(&self, p: Vec3, n: Vec3, to_light: Vec3, pcf_radius: u32) -> f32 {
         let v = &self.view;
         let m = &v.view_proj;
@@ -506,7 +507,7 @@ pub fn plan_probes(prepared: &PreparedScene, bounds: &Aabb) -> Vec<ProbePlan> {
 /// along the ray at quadratically spaced distances up to the probe's far plane, then a
 /// bisection between the last step in front of the seen surface and the first behind it. More
 /// steps find thinner surfaces and land closer, at the cost of a distance lookup each.
-pub const PROBE_MARCH_STEPS: u32 = 16;
+pub const PROBE_MARCH_STEPS: u32 = 8;
 pub const PROBE_REFINE_STEPS: u32 = 5;
 
 /// A rendered probe: six faces of `size`², face after face in [`CUBE_FACES`] order, row-major,
@@ -560,7 +561,7 @@ impl Probe {
     /// where it first goes behind the surface the probe saw (|y| > D(y), y = p + t·dir − centre,
     /// D the distance the probe saw along y), marched in [`PROBE_MARCH_STEPS`] and refined in
     /// [`PROBE_REFINE_STEPS`]; `dir` itself when it never does (it leaves towards the sky).
-    #[inline]
+    #[inline(always)]
     pub fn lookup_direction(&self, p: Vec3, dir: Vec3) -> Vec3 {
         match self.plan.parallax_box {
             Some(b) => {
@@ -600,6 +601,7 @@ impl Probe {
     }
 
     /// The probe's colour for a ray from `p` along unit `dir` (bilinear within the face).
+    #[inline(always)]
     pub fn sample(&self, p: Vec3, dir: Vec3) -> Vec3 {
         let d = self.lookup_direction(p, dir);
         if d == Vec3::ZERO {
@@ -689,7 +691,7 @@ pub const PLANAR_THICKNESS: f32 = 0.05;
 /// instead of its probe: a refractive object that is planar ([`PLANAR_THICKNESS`]). A probe
 /// sees such an object's background (a pool's floor, what lies behind a window) from one point
 /// and at grazing angles, blurred; the see-through layer sees it from the camera, sharp.
-pub fn see_through_objects(prepared: &PreparedScene) -> Vec<bool> {
+pub fn see_through_objects(prepared: &PreparedScene, refractors: &[Option<Refractor>]) -> Vec<bool> {
     let scene = prepared.scene;
     scene
         .objects
@@ -697,34 +699,168 @@ pub fn see_through_objects(prepared: &PreparedScene) -> Vec<bool> {
         .enumerate()
         .map(|(i, o)| {
             let b = prepared.object_bounds[i];
-            !b.is_empty() && o.is_refractive(&scene.materials) && is_planar(&b)
+            !b.is_empty()
+                && o.is_refractive(&scene.materials)
+                && (is_planar(&b) || matches!(refractors.get(i), Some(Some(Refractor::Hull(_)))))
         })
         .collect()
 }
 
-/// Per object: whether a planar object ([`is_planar`]) is a closed slab, such as a pane of glass
-/// modelled as a thin box: it has faces looking both ways along its thinnest axis, so a ray
-/// refracted into it leaves through the opposite face, bent back to its first direction (the
-/// faces are parallel; the sideways shift, at most the slab's thickness, is left out). A single
-/// sheet, such as a pool's water surface, has faces on one side only: the ray stays refracted.
-pub fn slab_objects(prepared: &PreparedScene) -> Vec<bool> {
-    let mut faces = vec![[false; 2]; prepared.scene.objects.len()];
-    for mesh in &prepared.meshes {
-        let o = mesh.object as usize;
-        let b = prepared.object_bounds[o];
-        if b.is_empty() || !is_planar(&b) {
-            continue;
+/// Most distinct face planes a refractive object may have to count as a convex polyhedron
+/// ([`ConvexHull`]): boxes, panes and prisms pass; finely tessellated shapes are refracted once
+/// (spheres excepted: [`Refractor::Sphere`]). Larger values let more shapes refract exactly, at
+/// the cost of a longer exit search per pixel.
+pub const CONVEX_MAX_PLANES: usize = 32;
+
+/// A closed convex polyhedron, as its face planes (`xyz` the outward unit normal, `w` the offset:
+/// inside where `n · x ≤ w`). A refractive object of this shape (a pane modelled as a thin box,
+/// a glass cube) is refracted exactly through both of its faces: in at the pixel, out where the
+/// refracted ray meets the face plane it leaves by ([`ConvexHull::exit`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConvexHull {
+    pub planes: Vec<Vec4>,
+}
+
+impl ConvexHull {
+    /// The triangles as a closed convex polyhedron, if they are one: at most
+    /// [`CONVEX_MAX_PLANES`] distinct face planes, every corner on the inner side of every plane,
+    /// and a plane facing each of ±x, ±y, ±z (closed; a single sheet is not). Normals are
+    /// oriented away from the corners' centroid, whatever the winding.
+    pub fn of_triangles(triangles: &[[Vec3; 3]]) -> Option<Self> {
+        let corners = triangles.iter().flatten();
+        let n = (triangles.len() * 3) as f32;
+        if triangles.is_empty() {
+            return None;
         }
-        let axis = (b.max - b.min).min_position();
-        for t in &mesh.indices {
-            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-            let n = (b - a).cross(c - a).normalize_or_zero()[axis];
-            if n.abs() > 0.9 {
-                faces[o][usize::from(n > 0.0)] = true;
+        let centroid = corners.clone().fold(Vec3::ZERO, |a, &c| a + c) / n;
+        let extent = corners.clone().fold(0.0f32, |m, c| m.max((*c - centroid).abs().max_element()));
+        let tolerance = 1e-4 * extent.max(1e-6);
+        let mut planes: Vec<Vec4> = Vec::new();
+        for [a, b, c] in triangles {
+            let Some(normal) = (*b - *a).cross(*c - *a).try_normalize() else { continue };
+            let normal = if normal.dot(centroid - *a) > 0.0 { -normal } else { normal };
+            let plane = normal.extend(normal.dot(*a));
+            if !planes.iter().any(|q| q.xyz().dot(normal) > 1.0 - 1e-5 && (q.w - plane.w).abs() <= tolerance) {
+                if planes.len() == CONVEX_MAX_PLANES {
+                    return None;
+                }
+                planes.push(plane);
+            }
+        }
+        let convex = planes.iter().all(|q| corners.clone().all(|c| q.xyz().dot(*c) <= q.w + tolerance));
+        let closed = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z]
+            .iter()
+            .all(|d| planes.iter().any(|q| q.xyz().dot(*d) > 1e-3));
+        (convex && closed).then_some(Self { planes })
+    }
+
+    /// Where a ray inside the polyhedron, from `p` along unit `t`, leaves it: the exit point and
+    /// the outward normal of the face it leaves by (`None` for a degenerate `t`).
+    pub fn exit(&self, p: Vec3, t: Vec3) -> Option<(Vec3, Vec3)> {
+        let mut best: Option<(f32, Vec3)> = None;
+        for q in &self.planes {
+            let n = q.xyz();
+            let along = n.dot(t);
+            if along > 1e-6 {
+                let d = ((q.w - n.dot(p)) / along).max(0.0);
+                if best.is_none_or(|(b, _)| d < b) {
+                    best = Some((d, n));
+                }
+            }
+        }
+        best.map(|(d, n)| (p + t * d, n))
+    }
+}
+
+/// The shape a refraction ray leaves a refractive object by, where the fallbacks know it: the
+/// ray bent in at the pixel is bent again where it leaves, as the trace stage's ray is, before
+/// the see-through layer or the probe is looked up. Objects of other shapes are refracted once.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Refractor {
+    /// A closed convex polyhedron (a pane modelled as a thin box, a glass cube).
+    Hull(ConvexHull),
+    /// A (tessellated) sphere: every corner at the radius from the bounds' centre.
+    Sphere { centre: Vec3, radius: f32 },
+}
+
+/// Total internal reflections a ray is followed through inside a [`Refractor`] before the
+/// fallback takes its last direction as the way out.
+pub const REFRACTOR_BOUNCES: u32 = 4;
+
+/// A tessellated sphere's corners lie within this share of its radius.
+pub const SPHERE_TOLERANCE: f32 = 0.01;
+
+impl Refractor {
+    /// The object's triangles as a sphere or a convex hull, if they are one.
+    pub fn of_triangles(triangles: &[[Vec3; 3]]) -> Option<Self> {
+        let mut bounds = Aabb::EMPTY;
+        triangles.iter().flatten().for_each(|c| bounds.grow(*c));
+        if bounds.is_empty() {
+            return None;
+        }
+        let (centre, half) = ((bounds.min + bounds.max) * 0.5, (bounds.max - bounds.min) * 0.5);
+        let radius = half.max_element();
+        let round = triangles.len() >= 32
+            && half.min_element() >= radius * (1.0 - SPHERE_TOLERANCE)
+            && triangles.iter().flatten().all(|c| (c.distance(centre) - radius).abs() <= radius * SPHERE_TOLERANCE);
+        if round {
+            return Some(Self::Sphere { centre, radius });
+        }
+        if triangles.len() > 4 * CONVEX_MAX_PLANES {
+            return None;
+        }
+        ConvexHull::of_triangles(triangles).map(Self::Hull)
+    }
+
+    /// The ray refracted into the object at `p` along unit `t`, followed out: refracted where it
+    /// meets the surface from inside, or on total internal reflection reflected and followed on,
+    /// up to [`REFRACTOR_BOUNCES`] times. Returns where it leaves and its direction then (`p`,
+    /// `t` if it cannot be followed).
+    pub fn leave(&self, p: Vec3, t: Vec3, env_ior: f32, ior: f32) -> (Vec3, Vec3) {
+        let (mut p, mut t) = (p, t);
+        for _ in 0..REFRACTOR_BOUNCES {
+            let Some((q, n)) = self.exit(p, t) else { break };
+            let (out, tir) = refract_or_reflect(t, n, env_ior, ior);
+            (p, t) = (q, out);
+            if !tir {
+                break;
+            }
+        }
+        (p, t)
+    }
+
+    /// Where a ray inside the object, from `p` along unit `t`, leaves it: the exit point and
+    /// the outward normal there.
+    pub fn exit(&self, p: Vec3, t: Vec3) -> Option<(Vec3, Vec3)> {
+        match self {
+            Self::Hull(h) => h.exit(p, t),
+            Self::Sphere { centre, radius } => {
+                // The far root of |p + t·s − c|² = r².
+                let o = p - *centre;
+                let b = o.dot(t);
+                let disc = b * b - (o.length_squared() - radius * radius);
+                if disc < 0.0 {
+                    return None;
+                }
+                let q = p + t * (-b + disc.sqrt()).max(0.0);
+                Some((q, (q - *centre) / *radius))
             }
         }
     }
-    faces.into_iter().map(|[neg, pos]| neg && pos).collect()
+}
+
+/// Per object: its [`Refractor`] when it is refractive and a sphere or a closed convex
+/// polyhedron.
+pub fn refractors(prepared: &PreparedScene) -> Vec<Option<Refractor>> {
+    let scene = prepared.scene;
+    let mut triangles: Vec<Vec<[Vec3; 3]>> = vec![Vec::new(); scene.objects.len()];
+    for mesh in &prepared.meshes {
+        let o = mesh.object as usize;
+        if scene.objects[o].is_refractive(&scene.materials) {
+            triangles[o].extend(mesh.indices.iter().map(|t| t.map(|i| mesh.positions[i as usize])));
+        }
+    }
+    triangles.iter().map(|t| Refractor::of_triangles(t)).collect()
 }
 
 /// Whether world bounds are planar: smallest extent at most [`PLANAR_THICKNESS`] of the largest.
@@ -773,22 +909,22 @@ pub struct SeeThrough<'a> {
 impl SeeThrough<'_> {
     /// The screen pixel a world point lands on, if on screen.
     #[inline]
-    fn pixel_of(&self, x: Vec3) -> Option<usize> {
+    pub fn pixel_of(&self, x: Vec3) -> Option<usize> {
         let (w, h) = (self.layer.width, self.layer.height);
         let (uv, _) = project(&self.view_proj, x)?;
         ((0.0..1.0).contains(&uv.x) && (0.0..1.0).contains(&uv.y))
             .then(|| (uv.y * h as f32) as usize * w as usize + (uv.x * w as f32) as usize)
     }
 
-    /// The layer texel the refraction along unit `t` from `p` meets, or `None` where nothing
-    /// lies behind `p` (the probe answers then). The distance starts as the surface's behind
-    /// `p` and is refined [`SEE_THROUGH_STEPS`] times against the tangent plane of the surface
-    /// where the point lands; a point that leaves the layer keeps the last pixel in it.
-    pub fn texel_along(&self, p: Vec3, t: Vec3) -> Option<usize> {
+    /// What the refraction along unit `t` from `p` meets in the layer. The distance starts as
+    /// the surface's behind `p` and is refined [`SEE_THROUGH_STEPS`] times against the tangent
+    /// plane of the surface where the point lands; a point that leaves the layer keeps the last
+    /// pixel in it.
+    pub fn hit_along(&self, p: Vec3, t: Vec3) -> LayerHit {
         let g = self.layer;
-        let i = self.pixel_of(p)?;
+        let Some(i) = self.pixel_of(p) else { return LayerHit::Unknown };
         if g.object_id[i] == crate::NO_OBJECT {
-            return None;
+            return LayerHit::Sky;
         }
         let mut d = g.position[i].distance(p);
         let mut j = i;
@@ -805,15 +941,29 @@ impl SeeThrough<'_> {
             }
             let next = (q - p).dot(n) / denom;
             if !(next > 0.0 && next.is_finite()) {
-                break;
+                // The ray turns away from the surface it was aimed at: what it meets is not in
+                // the layer (above a floor, behind the camera).
+                return LayerHit::Unknown;
             }
             d = next;
         }
         if let Some(k) = self.pixel_of(p + t * d) {
             j = k;
         }
-        (j < self.color.len()).then_some(j)
+        if j < self.color.len() { LayerHit::Texel(j) } else { LayerHit::Unknown }
     }
+}
+
+/// What a ray looked up in the see-through layer meets ([`SeeThrough::hit_along`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LayerHit {
+    /// The surface at this layer texel (the sky where the texel has none).
+    Texel(usize),
+    /// Nothing: the layer shows the sky behind the ray's start.
+    Sky,
+    /// Not known from the layer (the start is off it, or the ray turns away from the surfaces
+    /// it is aimed at): the object's probe answers.
+    Unknown,
 }
 
 /// Everything the per-pixel fallback reads: the lights, their maps, the probes.
@@ -828,9 +978,8 @@ pub struct FallbackScene<'a> {
     pub pcf_radius: u32,
     /// Per object: whether its refraction uses `see_through` ([`see_through_objects`]).
     pub see_through_objects: &'a [bool],
-    /// Per object: whether it is a closed slab ([`slab_objects`]), whose refraction leaves it
-    /// along the incident direction.
-    pub slab_objects: &'a [bool],
+    /// Per object: the shape a refraction ray leaves it by ([`refractors`]), bent a second time.
+    pub refractors: &'a [Option<Refractor>],
     /// The see-through layer, when a planar refractive object needed it this frame.
     pub see_through: Option<SeeThrough<'a>>,
 }
@@ -840,54 +989,73 @@ impl FallbackScene<'_> {
     /// `(shadow, reflection, refraction)`, the same quantities the trace stage writes, from the
     /// shadow maps, the object's probe and (planar refractive objects) the see-through layer
     /// instead of rays.
+    #[inline(always)]
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
-        self.terms(object, s, self.see_through.as_ref())
+        let incident = self.camera.incident_towards(s.position);
+        let shadow = self.shadow(s, -incident);
+        let (reflection, refraction) = self.reflection_refraction(object, s, incident, self.see_through.as_ref());
+        (shadow, reflection, refraction)
     }
 
-    /// Texel `j` of the see-through layer as the blend would show it with fallbacks: its
-    /// lighting through eq. 4–6 with its own fallback terms (its probe, not the layer again).
-    pub fn see_through_texel(&self, st: &SeeThrough, j: usize) -> Vec3 {
+    /// What a refraction ray along unit `t` sees through the see-through layer from `p`, shaded
+    /// as the trace stage shades a secondary hit (unshadowed lighting, combined with the hit
+    /// surface's reflection and refraction, here from its probe); the sky where nothing lies
+    /// behind `p`; `None` off the layer (the probe answers then).
+    pub fn through_layer(&self, st: &SeeThrough, p: Vec3, t: Vec3) -> Option<Vec3> {
+        let j = match st.hit_along(p, t) {
+            LayerHit::Texel(j) if st.layer.object_id[j] != crate::NO_OBJECT => j,
+            // The sky along the ray (the layer's sky texels are along the camera's rays).
+            LayerHit::Texel(_) | LayerHit::Sky => return Some(sky(&self.scene.environment, &self.scene.textures, t)),
+            LayerHit::Unknown => return None,
+        };
         let (g, lit) = (st.layer, st.color[j]);
         let id = g.object_id[j];
-        match g.surface(j) {
+        Some(match g.surface(j) {
             Some(s) if crate::is_polygon(id) && s.normal.length_squared() > 0.0 => {
-                let (shadow, reflection, refraction) = self.terms(id, &s, None);
-                crate::blend::blend_pixel(lit, shadow, reflection, refraction, g.optical[j], 1.0)
+                let (reflection, refraction) = self.reflection_refraction(id, &s, t, None);
+                crate::blend::combine(lit, reflection, refraction, s.reflectivity, 1.0 - s.opacity)
             }
             _ => lit,
-        }
+        })
     }
 
-    /// [`Self::pixel`], looking through `see_through` where the object is planar and refractive.
-    fn terms(&self, object: u32, s: &Surface, see_through: Option<&SeeThrough>) -> (Vec3, Vec3, Vec3) {
-        let scene = self.scene;
-        let incident = self.camera.incident_towards(s.position);
-        let view = -incident;
-        let view_distance = (s.position - self.camera.position).dot(self.camera.forward());
-
+    /// The shadow term of surface `s` seen along `view` (towards the eye): 1 minus each
+    /// light's Blinn–Phong share times its shadow maps' occlusion.
+    #[inline(always)]
+    fn shadow(&self, s: &Surface, view: Vec3) -> Vec3 {
         let mut shadow = Vec3::ONE;
         let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
-        if !unlit {
-            for (k, light) in lights(&scene.lights).enumerate() {
-                let Some(Some(maps)) = self.shadow_maps.get(k) else { continue };
-                let (dir, _dist, radiance) = self.frame_lights.incident_and_distance(k, s.position);
-                let n = facing(s.normal, view);
-                if radiance == Vec3::ZERO || n.dot(dir) <= 0.0 {
-                    continue;
-                }
-                let light_position = match light {
-                    Light::Point(l) => l.position,
-                    Light::Spot(l) => l.position,
-                    Light::Directional(_) => Vec3::ZERO,
-                };
-                let Some(map) = maps.map_for(s.position, view_distance, light_position) else { continue };
-                let vis = map.visibility(s.position, n, dir, self.pcf_radius);
-                if vis < 1.0 {
-                    shadow -= self.frame_lights.blinn_phong_incident((dir, radiance), s, view) * (1.0 - vis);
-                }
+        if unlit {
+            return shadow;
+        }
+        let view_distance = (s.position - self.camera.position).dot(self.camera.forward());
+        let n = facing(s.normal, view);
+        for (k, light) in lights(&self.scene.lights).enumerate() {
+            let Some(Some(maps)) = self.shadow_maps.get(k) else { continue };
+            let (dir, _dist, radiance) = self.frame_lights.incident_and_distance(k, s.position);
+            if radiance == Vec3::ZERO || n.dot(dir) <= 0.0 {
+                continue;
+            }
+            let light_position = match light {
+                Light::Point(l) => l.position,
+                Light::Spot(l) => l.position,
+                Light::Directional(_) => Vec3::ZERO,
+            };
+            let Some(map) = maps.map_for(s.position, view_distance, light_position) else { continue };
+            let vis = map.visibility(s.position, n, dir, self.pcf_radius);
+            if vis < 1.0 {
+                shadow -= self.frame_lights.blinn_phong_incident((dir, radiance), s, view) * (1.0 - vis);
             }
         }
+        shadow
+    }
 
+    /// The reflection and refraction terms of object `object`'s surface `s` hit along unit
+    /// `incident`: its probe (the sky without one), or for a planar refractive object the
+    /// see-through layer when given.
+    #[inline(always)]
+    fn reflection_refraction(&self, object: u32, s: &Surface, incident: Vec3, see_through: Option<&SeeThrough>) -> (Vec3, Vec3) {
+        let scene = self.scene;
         let probe = self.probes.get(object as usize).copied().flatten();
         let look = |dir: Vec3| match probe {
             Some(p) => p.sample(s.position, dir),
@@ -896,19 +1064,25 @@ impl FallbackScene<'_> {
         let reflection = if s.reflectivity > 0.0 { look(reflect(incident, s.normal).normalize_or_zero()) } else { Vec3::ZERO };
         let refraction = if s.opacity < 1.0 {
             let (dir, _tir) = refract_or_reflect(incident, s.normal, scene.environment.ior, s.ior);
-            let flag = |f: &[bool]| f.get(object as usize).copied().unwrap_or(false);
+            // Bent in here; bent again where the ray leaves a sphere or a convex polyhedron (a
+            // pane's parallel faces give the incident direction back); a sheet (a pool's water)
+            // or another shape keeps it refracted once.
+            let (from, along) = match self.refractors.get(object as usize).and_then(Option::as_ref) {
+                Some(r) => r.leave(s.position, dir, scene.environment.ior, s.ior),
+                None => (s.position, dir),
+            };
             let through = match see_through {
-                // Through a slab: bent in, bent back out by the parallel face behind.
-                Some(st) if flag(self.see_through_objects) => {
-                    st.texel_along(s.position, if flag(self.slab_objects) { incident } else { dir }).map(|j| self.see_through_texel(st, j))
-                }
+                Some(st) if self.see_through_objects.get(object as usize).copied().unwrap_or(false) => self.through_layer(st, from, along),
                 _ => None,
             };
-            through.unwrap_or_else(|| look(dir))
+            through.unwrap_or_else(|| match probe {
+                Some(p) => p.sample(from, along),
+                None => sky(&scene.environment, &scene.textures, along),
+            })
         } else {
             Vec3::ZERO
         };
-        (shadow, reflection, refraction)
+        (reflection, refraction)
     }
 }
 
@@ -1065,15 +1239,104 @@ mod tests {
         layer.normal = vec![Vec3::Y; n * n];
         layer.object_id = vec![0u32; n * n];
         let st = SeeThrough { view_proj: camera.view_projection(1.0), layer: &layer, color: &color };
-        let j = st.texel_along(Vec3::new(0.1, 1.0, 0.0), Vec3::new(1.0, -1.0, 0.0).normalize()).unwrap();
+        let LayerHit::Texel(j) = st.hit_along(Vec3::new(0.1, 1.0, 0.0), Vec3::new(1.0, -1.0, 0.0).normalize()) else { panic!() };
         assert_eq!(color[j], Vec3::splat(6.0));
-        // Nothing behind: no answer (the probe's turn).
+        // Up, away from the floor it starts above: not in the layer.
+        assert_eq!(st.hit_along(Vec3::new(0.1, 1.0, 0.0), Vec3::new(1.0, 1.0, 0.0).normalize()), LayerHit::Unknown);
+        // Nothing behind: the sky.
         let empty = GBuffer::new(8, 8);
         let st = SeeThrough { layer: &empty, ..st };
-        assert_eq!(st.texel_along(Vec3::new(0.1, 1.0, 0.0), Vec3::NEG_Y), None);
+        assert_eq!(st.hit_along(Vec3::new(0.1, 1.0, 0.0), Vec3::NEG_Y), LayerHit::Sky);
         // The widened view keeps the eye and orientation and grows by the guard factor.
         let (wide, w, h) = see_through_view(&camera, 64, 32);
         assert_eq!((wide.position, w, h), (camera.position, 96, 48));
+    }
+
+    /// The 12 triangles of the box `min`–`max`, wound outward or, with `flip`, inward.
+    fn box_triangles(min: Vec3, max: Vec3, flip: bool) -> Vec<[Vec3; 3]> {
+        let c = |i: usize| Vec3::new([min.x, max.x][i & 1], [min.y, max.y][(i >> 1) & 1], [min.z, max.z][(i >> 2) & 1]);
+        let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+        quads
+            .iter()
+            .flat_map(|q| [[c(q[0]), c(q[1]), c(q[2])], [c(q[0]), c(q[2]), c(q[3])]])
+            .map(|[a, b, d]| if flip { [a, d, b] } else { [a, b, d] })
+            .collect()
+    }
+
+    #[test]
+    fn a_box_is_a_convex_hull_and_a_sheet_is_not() {
+        for flip in [false, true] {
+            let hull = ConvexHull::of_triangles(&box_triangles(Vec3::splat(-0.5), Vec3::splat(0.5), flip)).unwrap();
+            assert_eq!(hull.planes.len(), 6);
+            // From the centre along +x: out at x = 0.5 through the +x face, whatever the winding.
+            let (q, n) = hull.exit(Vec3::ZERO, Vec3::X).unwrap();
+            assert!((q - Vec3::new(0.5, 0.0, 0.0)).length() < 1e-6 && (n - Vec3::X).length() < 1e-6, "{q} {n}");
+            // Along (1, 1, 0)/√2 from (0, −0.25, 0): the +x face at x = 0.5 (y = 0.25) comes first.
+            let (q, n) = hull.exit(Vec3::new(0.0, -0.25, 0.0), Vec3::new(1.0, 1.0, 0.0).normalize()).unwrap();
+            assert!((q - Vec3::new(0.5, 0.25, 0.0)).length() < 1e-5 && n == Vec3::X, "{q} {n}");
+        }
+        // One quad (a pool's water) is not closed.
+        let sheet = &box_triangles(Vec3::splat(-0.5), Vec3::splat(0.5), false)[..2];
+        assert_eq!(ConvexHull::of_triangles(sheet), None);
+        // Two boxes side by side in an L are not convex.
+        let mut l = box_triangles(Vec3::ZERO, Vec3::new(2.0, 1.0, 1.0), false);
+        l.extend(box_triangles(Vec3::ZERO, Vec3::new(1.0, 2.0, 1.0), false));
+        assert_eq!(ConvexHull::of_triangles(&l), None);
+    }
+
+    #[test]
+    fn a_tessellated_sphere_is_a_sphere_refractor() {
+        // A UV sphere of radius 2 at (1, 0, 0): its corners all lie on the sphere.
+        let (c, r) = (Vec3::new(1.0, 0.0, 0.0), 2.0);
+        let at = |i: u32, j: u32| {
+            let (theta, phi) = (std::f32::consts::PI * i as f32 / 8.0, std::f32::consts::TAU * j as f32 / 16.0);
+            c + r * Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin())
+        };
+        let tris: Vec<[Vec3; 3]> = (0..8)
+            .flat_map(|i| {
+                (0..16).flat_map(move |j| [[at(i, j), at(i + 1, j), at(i + 1, j + 1)], [at(i, j), at(i + 1, j + 1), at(i, j + 1)]])
+            })
+            .collect();
+        let Some(Refractor::Sphere { centre, radius }) = Refractor::of_triangles(&tris) else { panic!("not a sphere") };
+        assert!((centre - c).length() < 1e-5 && (radius - r).abs() < 1e-5, "{centre} {radius}");
+        // From the top pole straight down: out at the bottom pole, normal −y.
+        let sphere = Refractor::Sphere { centre, radius };
+        let (q, n) = sphere.exit(c + Vec3::Y * r, Vec3::NEG_Y).unwrap();
+        assert!((q - (c - Vec3::Y * r)).length() < 1e-5 && (n - Vec3::NEG_Y).length() < 1e-5, "{q} {n}");
+        // A chord at 60° to the radius: length 2r·cos 60° = r, and the way out is the way in
+        // mirrored (refracted in and out by the same angle).
+        let p = c + Vec3::Y * r;
+        let t = Vec3::new(60f32.to_radians().sin(), -60f32.to_radians().cos(), 0.0);
+        let (q, _) = sphere.exit(p, t).unwrap();
+        assert!((q.distance(p) - r).abs() < 1e-4, "{}", q.distance(p));
+        let (inside, _) = refract_or_reflect(Vec3::new(0.5, -1.0, 0.0).normalize(), Vec3::Y, 1.0, 1.5);
+        let (from, out) = sphere.leave(p, inside, 1.0, 1.5);
+        assert!(((from - c).length() - r).abs() < 1e-4);
+        // Symmetric about the chord's perpendicular bisector: the exit angle equals the entry's.
+        let n_out = (from - c) / r;
+        assert!((out.dot(n_out) - Vec3::new(0.5, -1.0, 0.0).normalize().dot(-Vec3::Y)).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_pane_gives_the_incident_direction_back() {
+        // A pane 0.03 thick across z, IOR 1.5: a ray at 40° bends in at the front face and
+        // leaves the back face parallel to where it came from, shifted sideways by
+        // d·sin(θ − θt)/cos θt (Snell: sin θt = sin 40° / 1.5).
+        let hull = ConvexHull::of_triangles(&box_triangles(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.03), false)).unwrap();
+        let theta = 40f32.to_radians();
+        let incident = Vec3::new(theta.sin(), 0.0, theta.cos());
+        let front = Vec3::ZERO;
+        let (t, tir) = refract_or_reflect(incident, Vec3::NEG_Z, 1.0, 1.5);
+        assert!(!tir);
+        let (q, n) = hull.exit(front, t).unwrap();
+        assert_eq!(n, Vec3::Z);
+        let (out, tir) = refract_or_reflect(t, n, 1.0, 1.5);
+        assert!(!tir && (out - incident).length() < 1e-5, "{out} vs {incident}");
+        let theta_t = (theta.sin() / 1.5).asin();
+        let shift = 0.03 * (theta - theta_t).sin() / theta_t.cos();
+        // The exit point's distance from the incident line through the entry point.
+        let off_line = (q - incident * q.dot(incident)).length();
+        assert!((off_line - shift).abs() < 1e-5, "{off_line} vs {shift}");
     }
 
     #[test]

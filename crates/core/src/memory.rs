@@ -162,8 +162,8 @@ pub fn estimate(scene: &Scene, backend: Backend, width: u32, height: u32, extra_
 /// assumes `--fallback raster` and every map and probe rendered): the three fallback buffers
 /// per pixel (GPU: their targets too), each shadow-casting light's maps (directional: its
 /// cascades; spot: one map; point: six cube faces; 4 bytes a texel), each reflective or
-/// refractive object's probe (colour and distance per texel), and with planar refractive objects
-/// the see-through layer (a G-buffer and lighting over the widened view).
+/// refractive object's probe (colour and distance per texel), and with refractive objects the
+/// see-through layer (a G-buffer and lighting over the widened view).
 pub fn fallback_bytes(scene: &Scene, backend: Backend, width: u32, height: u32) -> u64 {
     use crate::fallback::{FallbackSettings, SEE_THROUGH_GUARD};
     let s = FallbackSettings::default();
@@ -177,10 +177,9 @@ pub fn fallback_bytes(scene: &Scene, backend: Backend, width: u32, height: u32) 
     let probe = 6 * s.probe_size as u64 * s.probe_size as u64 * (size_of::<Vec3>() as u64 + 4);
     let probes =
         scene.objects.iter().filter(|o| o.is_reflective(&scene.materials) || o.is_refractive(&scene.materials)).count() as u64 * probe;
-    // Planar refractive objects (`fallback::see_through_objects`, from the objects' bounds).
-    let planar =
-        scene.objects.iter().any(|o| o.is_refractive(&scene.materials) && o.world_bounds().is_some_and(|b| crate::fallback::is_planar(&b)));
-    let see_through = if planar {
+    // Any refractive object may be seen through the layer (`fallback::see_through_objects`:
+    // planar ones and convex polyhedra).
+    let see_through = if scene.objects.iter().any(|o| o.is_refractive(&scene.materials)) {
         let layer_pixels = (pixels as f64 * (SEE_THROUGH_GUARD * SEE_THROUGH_GUARD) as f64).ceil() as u64;
         layer_pixels.saturating_mul(GBUFFER_BYTES_PER_PIXEL + size_of::<Vec3>() as u64)
     } else {
@@ -270,8 +269,10 @@ mod tests {
         assert!(err.contains("above the limit of") && err.contains("--max-memory"), "{err}");
         let huge = estimate(&scene, Backend::Cpu, 16384, 16384, 0);
         let err = huge.check(&MemoryLimit::explicit(8 << 30)).unwrap_err();
-        // Frame 40 GiB, the fallback buffers 9 GiB (36 bytes a pixel) with the prepared scene.
-        assert!(err.contains("frame 40.00 GiB") && err.contains("8.00 GiB (--max-memory)") && err.contains("--max-memory 50GiB"), "{err}");
+        // Frame 40 GiB; with the prepared scene the fallback buffers, 9 GiB (36 bytes a pixel),
+        // and the see-through layer for the glass cube, 65 GiB (2.25 × 16384² pixels of a
+        // G-buffer and its lighting).
+        assert!(err.contains("frame 40.00 GiB") && err.contains("8.00 GiB (--max-memory)") && err.contains("--max-memory 115GiB"), "{err}");
         let err = frame_only(16384, 16384, 0).check(&MemoryLimit::explicit(8 << 30)).unwrap_err();
         assert!(err.starts_with("this render's frame alone needs about 40.06 GiB"), "{err}");
     }

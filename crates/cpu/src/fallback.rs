@@ -10,8 +10,8 @@
 use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
 use hybrid_core::fallback::{
-    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, SeeThrough, ShadowMap, ShadowView, caster_meshes, plan_light_views,
-    plan_probes, project, scene_bounds, see_through_objects, see_through_view, slab_objects,
+    FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, Refractor, SeeThrough, ShadowMap, ShadowView, caster_meshes,
+    plan_light_views, plan_probes, project, refractors, scene_bounds, see_through_objects, see_through_view,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
@@ -38,13 +38,24 @@ pub struct FallbackCache {
     /// layer; per mesh: the meshes that layer draws (all the others).
     see_through_objects: Vec<bool>,
     see_through_meshes: Vec<bool>,
-    /// Per object: closed slabs (`slab_objects`), seen through unbent.
-    slab_objects: Vec<bool>,
+    /// Per object: what a refraction ray leaves it by (`refractors`).
+    refractors: Vec<Option<Refractor>>,
     bounds: Aabb,
     /// Shadow maps rendered per light (cascades, spot maps, cube faces), since the cache was made.
     pub shadow_map_renders: Vec<u64>,
     /// Probes rendered since the cache was made.
     pub probe_renders: u64,
+    /// The last see-through layer, kept while the view stays the same (scenes are static).
+    see_through: Option<SeeThroughLayer>,
+    /// See-through layers rendered since the cache was made.
+    pub see_through_renders: u64,
+}
+
+/// A see-through layer: the widened view's camera, its G-buffer and lighting.
+struct SeeThroughLayer {
+    view: Camera,
+    gbuffer: GBuffer,
+    lit: Vec<Vec3>,
 }
 
 impl FallbackCache {
@@ -52,7 +63,8 @@ impl FallbackCache {
         let scene = prepared.scene;
         let bounds = scene_bounds(prepared, spheres_cast);
         let casters = caster_meshes(prepared);
-        let see_through_objects = see_through_objects(prepared);
+        let refractors = refractors(prepared);
+        let see_through_objects = see_through_objects(prepared, &refractors);
         let see_through_meshes = prepared.meshes.iter().map(|m| !see_through_objects[m.object as usize]).collect();
         let mut plans = vec![None; scene.objects.len()];
         for p in plan_probes(prepared, &scene_bounds(prepared, false)) {
@@ -67,10 +79,12 @@ impl FallbackCache {
             casters,
             see_through_objects,
             see_through_meshes,
-            slab_objects: slab_objects(prepared),
+            refractors,
             bounds,
             shadow_map_renders: vec![0; n_lights],
             probe_renders: 0,
+            see_through: None,
+            see_through_renders: 0,
         }
     }
 
@@ -139,17 +153,22 @@ impl FallbackCache {
             self.maps[lv.light] = Some(LightShadowMaps { light: lv.light, kind: lv.kind, maps });
         }
 
-        // The see-through layer, when a planar refractive object has untraced pixels: the view
-        // rasterized without those objects, lit. Its texels are shaded with fallbacks too, so
-        // what shows in it needs probes as well.
+        // The see-through layer, when a planar or convex refractive object has untraced pixels:
+        // the view rasterized without those objects, lit; kept while the view stays the same.
+        // Its texels are shaded with their probes, so what shows in it needs probes as well.
         let see_through_needed = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
-        let layer = see_through_needed.then(|| {
+        if see_through_needed {
             let (view, w, h) = see_through_view(camera, gbuffer.width, gbuffer.height);
-            let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
-            let lit = lighting::deferred_lighting(&g, scene, &view);
-            (g, lit, view)
-        });
-        if let Some((g, _, _)) = &layer {
+            let same = self.see_through.as_ref().is_some_and(|l| l.view == view && (l.gbuffer.width, l.gbuffer.height) == (w, h));
+            if !same {
+                let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
+                let lit = lighting::deferred_lighting(&g, scene, &view);
+                self.see_through = Some(SeeThroughLayer { view, gbuffer: g, lit });
+                self.see_through_renders += 1;
+            }
+        }
+        let layer = self.see_through.as_ref().filter(|_| see_through_needed);
+        if let Some(SeeThroughLayer { gbuffer: g, .. }) = layer {
             for &id in &g.object_id {
                 if let Some(x) = needed.get_mut(id as usize) {
                     *x = true;
@@ -178,25 +197,31 @@ impl FallbackCache {
             camera,
             pcf_radius: self.settings.pcf_radius,
             see_through_objects: &self.see_through_objects,
-            slab_objects: &self.slab_objects,
-            see_through: layer.as_ref().map(|(g, lit, view)| SeeThrough {
-                view_proj: view.view_projection(g.width as f32 / g.height.max(1) as f32),
-                layer: g,
-                color: lit,
+            refractors: &self.refractors,
+            see_through: layer.map(|l| SeeThrough {
+                view_proj: l.view.view_projection(l.gbuffer.width as f32 / l.gbuffer.height.max(1) as f32),
+                layer: &l.gbuffer,
+                color: &l.lit,
             }),
         };
         const CHUNK: usize = 256;
         shadow.par_chunks_mut(CHUNK).zip(reflection.par_chunks_mut(CHUNK)).zip(refraction.par_chunks_mut(CHUNK)).enumerate().for_each(
             |(c, ((s, m), r))| {
-                for k in 0..s.len() {
-                    let i = c * CHUNK + k;
-                    let id = gbuffer.object_id[i];
-                    if gbuffer.mask[i] >= MASK_EPSILON || !is_polygon(id) {
-                        continue;
-                    }
-                    let Some(surface) = gbuffer.surface(i).filter(|s| s.normal.length_squared() > 0.0) else { continue };
-                    (s[k], m[k], r[k]) = fb.pixel(id, &surface);
-                }
+                // Compiled for the machine's widest instruction set (the lookups are inlined).
+                crate::isa::dispatch(
+                    #[inline(always)]
+                    || {
+                        for k in 0..s.len() {
+                            let i = c * CHUNK + k;
+                            let id = gbuffer.object_id[i];
+                            if gbuffer.mask[i] >= MASK_EPSILON || !is_polygon(id) {
+                                continue;
+                            }
+                            let Some(surface) = gbuffer.surface(i).filter(|s| s.normal.length_squared() > 0.0) else { continue };
+                            (s[k], m[k], r[k]) = fb.pixel(id, &surface);
+                        }
+                    },
+                )
             },
         );
         renders

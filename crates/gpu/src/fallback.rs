@@ -31,7 +31,7 @@ use bytemuck::{Pod, Zeroable};
 use hybrid_core::Stage;
 use hybrid_core::fallback::{
     FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowKind, ShadowMap, ShadowView, caster_meshes, plan_light_views, plan_probes,
-    scene_bounds, see_through_objects, see_through_view, slab_objects,
+    Refractor, refractors, scene_bounds, see_through_objects, see_through_view,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
@@ -341,7 +341,7 @@ impl FallbackGpu {
                 (m.object, r)
             })
             .collect::<Vec<(u32, Range<u32>)>>();
-        let see_through_objects = see_through_objects(prepared);
+        let see_through_objects = see_through_objects(prepared, &refractors(prepared));
         let see_through_ranges = triangle_runs(&mesh_triangles, |o| !see_through_objects.get(o as usize).copied().unwrap_or(false));
 
         // Probes: six layers per planned object.
