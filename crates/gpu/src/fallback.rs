@@ -5,12 +5,12 @@
 //! point-light cube face); each light's views are cached as the CPU caches them (a layer is
 //! re-rendered only when its `ShadowView` changed). Probes are rendered with this backend's own
 //! raster and deferred-lighting passes, six faces per reflective or refractive object, once,
-//! when the object first has untraced pixels. Planar refractive objects refract through the
-//! see-through layer (`SeeThrough`): the frame's view widened, rendered by the same raster and
-//! lighting passes without them into its own targets, every frame one has untraced pixels,
-//! before the probes (the objects it shows get probes: its texels are shaded with their own
-//! fallbacks, `FallbackScene::see_through_texel`); closed slabs (`slab_objects`) look it up
-//! along the incident direction.
+//! when the object first has untraced pixels. Planar and convex refractive objects refract
+//! through the see-through layer (`SeeThrough`): the frame's view widened, rendered by the same
+//! raster and lighting passes without them into its own targets, every frame one has untraced
+//! pixels, before the probes (the objects it shows get probes: its texels are shaded as the
+//! trace shades a secondary hit, `FallbackScene::through_layer`). A refracted ray is followed out
+//! of a sphere or convex refractor first (`Refractor::leave`; hull planes in one buffer).
 //! Probe faces and that layer sample textures at level 0 (`RasterPass::encode_triangles`). One
 //! compute pass (`shaders/fallback.wgsl`, the twin of `FallbackScene::pixel`) then writes the
 //! three fallback targets.
@@ -30,8 +30,8 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 use hybrid_core::Stage;
 use hybrid_core::fallback::{
-    FallbackSettings, LightShadowMaps, Probe, ProbePlan, ShadowKind, ShadowMap, ShadowView, caster_meshes, plan_light_views, plan_probes,
-    Refractor, refractors, scene_bounds, see_through_objects, see_through_view,
+    FallbackSettings, LightShadowMaps, Probe, ProbePlan, Refractor, ShadowKind, ShadowMap, ShadowView, caster_meshes, plan_light_views,
+    plan_probes, refractors, scene_bounds, see_through_objects, see_through_view,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
@@ -65,6 +65,10 @@ pub const SHADOW_NONE: u32 = 0;
 pub const SHADOW_DIRECTIONAL: u32 = 1;
 pub const SHADOW_SPOT: u32 = 2;
 pub const SHADOW_POINT: u32 = 3;
+/// A refractive object's shape in `ProbeGpu.info.w` (`hybrid_core::fallback::Refractor`).
+pub const REFRACTOR_NONE: u32 = 0;
+pub const REFRACTOR_SPHERE: u32 = 1;
+pub const REFRACTOR_HULL: u32 = 2;
 /// Which depth array a view lies in (`ShadowViewGpu.array_index`).
 pub const SHADOW_ARRAY_MAPS: u32 = 0;
 pub const SHADOW_ARRAY_CUBE: u32 = 1;
@@ -106,9 +110,13 @@ pub struct GpuProbe {
     /// w = 1: box-projected against `[box_min, box_max]`.
     pub box_min: [f32; 4],
     pub box_max: [f32; 4],
-    /// Rendered (0/1), first layer of its six faces, see-through object (0/1), closed slab (0/1:
-    /// `slab_objects`, its refraction looked up along the incident direction).
+    /// Rendered (0/1), first layer of its six faces, see-through object (0/1), refractor
+    /// (`hybrid_core::fallback::Refractor`: 0 none, 1 sphere, 2 convex hull).
     pub info: [u32; 4],
+    /// A sphere refractor's centre and radius.
+    pub sphere: [f32; 4],
+    /// A hull refractor's first plane in `refractor_planes` and its plane count.
+    pub planes: [u32; 4],
 }
 
 /// `ProbeFace` of probe_distance.wgsl: the face being rendered.
@@ -224,6 +232,8 @@ pub struct FallbackGpu {
     probes: wgpu::Buffer,
     /// Per probe texel: the distance the probe saw (`Probe::distance`).
     probe_distances: wgpu::Buffer,
+    /// The convex refractors' face planes (`GpuProbe::planes` indexes them).
+    refractor_planes: wgpu::Buffer,
     probe_face: wgpu::Buffer,
     distance_pipeline: wgpu::ComputePipeline,
     distance_layout: wgpu::BindGroupLayout,
@@ -341,16 +351,30 @@ impl FallbackGpu {
                 (m.object, r)
             })
             .collect::<Vec<(u32, Range<u32>)>>();
-        let see_through_objects = see_through_objects(prepared, &refractors(prepared));
+        let refractors = refractors(prepared);
+        let see_through_objects = see_through_objects(prepared, &refractors);
         let see_through_ranges = triangle_runs(&mesh_triangles, |o| !see_through_objects.get(o as usize).copied().unwrap_or(false));
 
         // Probes: six layers per planned object.
         let mut plans = vec![None; s.objects.len()];
         let mut probe_data = vec![GpuProbe::zeroed(); s.objects.len().max(1)];
-        let slabs = slab_objects(prepared);
-        for ((data, &see), &slab) in probe_data.iter_mut().zip(&see_through_objects).zip(&slabs) {
+        // Per object: see-through, and the shape a refraction ray leaves it by (hull planes
+        // gathered into one buffer).
+        let mut planes: Vec<[f32; 4]> = Vec::new();
+        for ((data, &see), refractor) in probe_data.iter_mut().zip(&see_through_objects).zip(&refractors) {
             data.info[2] = u32::from(see);
-            data.info[3] = u32::from(slab);
+            match refractor {
+                Some(Refractor::Sphere { centre, radius }) => {
+                    data.info[3] = REFRACTOR_SPHERE;
+                    data.sphere = centre.extend(*radius).to_array();
+                }
+                Some(Refractor::Hull(hull)) => {
+                    data.info[3] = REFRACTOR_HULL;
+                    data.planes = [planes.len() as u32, hull.planes.len() as u32, 0, 0];
+                    planes.extend(hull.planes.iter().map(|p| p.to_array()));
+                }
+                None => {}
+            }
         }
         let mut layers = 0u32;
         for plan in plan_probes(prepared, &scene_bounds(prepared, false)) {
@@ -360,7 +384,8 @@ impl FallbackGpu {
                 centre: plan.centre.extend(plan.far).to_array(),
                 box_min: b.min.extend(if plan.parallax_box.is_some() { 1.0 } else { 0.0 }).to_array(),
                 box_max: b.max.extend(0.0).to_array(),
-                info: [0, layers, u32::from(see_through_objects[o]), u32::from(slabs[o])],
+                info: [0, layers, probe_data[o].info[2], probe_data[o].info[3]],
+                ..probe_data[o]
             };
             plans[o] = Some((plan, layers));
             layers += 6;
@@ -387,6 +412,11 @@ impl FallbackGpu {
             label: Some("fallback.probes"),
             contents: bytemuck::cast_slice(&probe_data),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        });
+        let refractor_planes = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("fallback.refractor_planes"),
+            contents: bytemuck::cast_slice(if planes.is_empty() { &[[0.0f32; 4]][..] } else { &planes[..] }),
+            usage: wgpu::BufferUsages::STORAGE,
         });
         let texels = u64::from(settings.probe_size) * u64::from(settings.probe_size);
         let probe_distances = device.create_buffer(&wgpu::BufferDescriptor {
@@ -456,6 +486,7 @@ impl FallbackGpu {
             probe_faces_view,
             probes,
             probe_distances,
+            refractor_planes,
             probe_face,
             distance_pipeline,
             distance_layout,
@@ -812,6 +843,7 @@ impl FallbackGpu {
             texture(22, &self.see_through_targets.diffuse.view),
             texture(23, &self.see_through_targets.specular.view),
             texture(24, &self.see_through_targets.optical.view),
+            (25, self.refractor_planes.as_entire_binding()),
         ];
         let entries: Vec<wgpu::BindGroupEntry> =
             resources.into_iter().map(|(binding, resource)| wgpu::BindGroupEntry { binding, resource }).collect();
@@ -947,7 +979,7 @@ fn triangle_runs(mesh_triangles: &[(u32, Range<u32>)], keep: impl Fn(u32) -> boo
 /// `FallbackGpu::new` refuses a device that allows fewer per shader stage (wgpu's default is 16).
 pub const LOOKUP_SAMPLED_TEXTURES: u32 = 17;
 
-/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–24).
+/// The lookup compute pipeline and its group 1 (fallback.wgsl's bindings 0–25).
 fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePipeline, wgpu::BindGroupLayout) {
     let entry = |binding: u32, ty: wgpu::BindingType| wgpu::BindGroupLayoutEntry {
         binding,
@@ -991,6 +1023,7 @@ fn lookup_pipeline(device: &wgpu::Device, scene: &SceneGpu) -> (wgpu::ComputePip
         entry(22, texture(float, d2)),
         entry(23, texture(float, d2)),
         entry(24, texture(float, d2)),
+        entry(25, buffer(true)),
     ];
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("fallback.lookup"), entries: &entries });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -1055,6 +1088,8 @@ mod tests {
             "SHADOW_BIAS_TEXELS",
             "PROBE_MARCH_STEPS",
             "SEE_THROUGH_STEPS",
+            "REFRACTOR_BOUNCES",
+            "REFRACTOR_HULL",
             "CUBE_FACE_UP",
         ] {
             assert!(FALLBACK_WGSL.contains(name) && !FALLBACK_WGSL.contains(&format!("const {name}")), "{name}");

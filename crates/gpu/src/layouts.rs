@@ -77,7 +77,7 @@ fn fallback_structs_match_their_wgsl_layouts() {
         [
             layout!(GpuShadowView, "ShadowViewGpu", [view_proj, near, far, texel_world, split_far, size, orthographic, array_index, layer]),
             layout!(GpuShadowLight, "ShadowLightGpu", [kind, first_view, view_count, _pad]),
-            layout!(GpuProbe, "ProbeGpu", [centre, box_min, box_max, info]),
+            layout!(GpuProbe, "ProbeGpu", [centre, box_min, box_max, info, sphere, planes]),
             layout!(
                 GpuFallbackParams,
                 "FallbackParams",

@@ -55,6 +55,10 @@ pub fn constants() -> String {
         ("PROBE_MARCH_STEPS", hybrid_core::fallback::PROBE_MARCH_STEPS),
         ("PROBE_REFINE_STEPS", hybrid_core::fallback::PROBE_REFINE_STEPS),
         ("SEE_THROUGH_STEPS", hybrid_core::fallback::SEE_THROUGH_STEPS),
+        ("REFRACTOR_BOUNCES", hybrid_core::fallback::REFRACTOR_BOUNCES),
+        ("REFRACTOR_NONE", crate::fallback::REFRACTOR_NONE),
+        ("REFRACTOR_SPHERE", crate::fallback::REFRACTOR_SPHERE),
+        ("REFRACTOR_HULL", crate::fallback::REFRACTOR_HULL),
     ];
     // The sky kind is an i32 in WGSL (compared with a signed uniform field).
     let i32s = [("SKY_COLOR", SKY_COLOR), ("SKY_GRADIENT", SKY_GRADIENT), ("SKY_CUBE", SKY_CUBE)];

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use glam::Vec3;
-use hybrid_core::fallback::{Fallback, see_through_objects, slab_objects};
+use hybrid_core::fallback::{Fallback, Refractor, refractors, see_through_objects};
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
 use hybrid_core::{Frame, FrameSettings, Mode};
@@ -223,17 +223,17 @@ fn pavilion_see_through_follows_the_camera() {
         assert_see_through_matches(&format!("pavilion frame {k}"), &scene, &c, &g);
         let fb = gpu.fallback_gpu().expect("the pavilion needs fallbacks");
         assert_eq!(fb.see_through_renders, k + 1, "frame {k}: one see-through layer per frame");
-        assert_eq!(fb.see_through_objects(), &see_through_objects(&PreparedScene::new(&scene))[..]);
+        assert_eq!(fb.see_through_objects(), &see_through(&PreparedScene::new(&scene))[..]);
     }
 }
 
 /// The pavilion at 14 s along its path (`--time 14`), in hybrid mode: the camera looks through
-/// the glass panes (closed slabs: seen through unbent) at the chrome dragon, whose texels in the
-/// see-through layer are shaded with their own fallbacks (its probe's reflections), so the dragon
+/// the glass panes (convex hulls: refracted in and out again) at the chrome dragon, whose texels
+/// in the see-through layer are shaded as secondary hits (its probe's reflections), so the dragon
 /// has a probe on both backends. The budget is `--budget 150000` at 640 × 360 scaled to this
 /// frame's pixels (at 160 × 90, 150000 itself traces every object), so that, as there, the panes
 /// are left to the fallbacks and the rest traced. The fallback buffers and the image match the
-/// CPU's, and so does the refraction over the panes' pixels. A slab's lookup runs along the
+/// CPU's, and so does the refraction over the panes' pixels. A pane's lookup runs parallel to the
 /// camera ray, so it lands where the pixel's centre does in the layer (widened 1.5×): at a
 /// texel's centre when the frame's width and height are multiples of 4 (as here and at
 /// 640 × 360), on a texel edge otherwise (160 × 90: rows), where the two backends' rounding
@@ -254,16 +254,23 @@ fn pavilion_panes_at_14s_match_the_cpu() {
     assert!(assert_fallbacks_match("pavilion 14 s", Mode::Hybrid, &c, &g, 0.02) > 0);
     assert_see_through_matches("pavilion 14 s", &scene, &c, &g);
     let prepared = PreparedScene::new(&scene);
-    let panes: Vec<bool> = slab_objects(&prepared).iter().zip(see_through_objects(&prepared)).map(|(&slab, see)| slab && see).collect();
+    let hulls = refractors(&prepared);
+    let panes: Vec<bool> =
+        see_through(&prepared).iter().zip(&hulls).map(|(&see, r)| see && matches!(r, Some(Refractor::Hull(_)))).collect();
     assert_refraction_matches_on("pavilion 14 s panes", &panes, &c, &g);
     let traced = c.gbuffer.mask.iter().filter(|&&m| m >= 1e-4).count();
     assert!(traced > 0, "the budget should trace the objects but the panes");
 }
 
-/// The refraction fallback over the untraced pixels of the planar refractive objects (where the
+/// `see_through_objects` with the scene's refractors.
+fn see_through(prepared: &PreparedScene) -> Vec<bool> {
+    see_through_objects(prepared, &refractors(prepared))
+}
+
+/// The refraction fallback over the untraced pixels of the see-through objects (where the
 /// see-through layer answers, not the probes) close to the CPU's ([`assert_refraction_matches_on`]).
 fn assert_see_through_matches(name: &str, scene: &Scene, c: &Frame, g: &Frame) {
-    let planar = see_through_objects(&PreparedScene::new(scene));
+    let planar = see_through(&PreparedScene::new(scene));
     assert!(planar.iter().any(|&p| p), "{name}: the scene has a planar refractive object");
     assert_refraction_matches_on(name, &planar, c, g);
 }

@@ -1,6 +1,6 @@
 // blend_equations.wgsl — eq. 4–6 of the blend (paper listing 10), the WGSL twin of
 // hybrid_core::blend::{combine, blend_pixel}. Prepended to blend.wgsl and to fallback.wgsl (the
-// see-through layer's texels are composed with their own fallback terms).
+// see-through layer's texels are combined with their own reflection and refraction).
 
 // Eq. 5/6 averaged: CM = OM·M + (1 − OM)(OR·R + (1 − OR)·C); CR = OR·R + (1 − OR)(OM·M + (1 − OM)·C).
 fn combine(c: vec3<f32>, m: vec3<f32>, r: vec3<f32>, reflectivity: f32, transparency: f32) -> vec3<f32> {

@@ -1,8 +1,9 @@
 // fallback.wgsl — stage 3b's lookups (issue 18): the WGSL twin of
 // hybrid_core::fallback::FallbackScene::pixel for every covered polygon pixel the trace stage
-// left out (mask < MASK_EPSILON), from the shadow maps, the objects' probes and (planar
-// refractive objects) the see-through layer, whose texel is shaded with its own fallback terms
-// (FallbackScene::see_through_texel); shadow 1, reflection and refraction 0 elsewhere.
+// left out (mask < MASK_EPSILON), from the shadow maps, the objects' probes and (planar and
+// convex refractive objects) the see-through layer, whose texel is shaded as the trace shades a
+// secondary hit (FallbackScene::through_layer); a refracted ray is followed out of a sphere or
+// convex refractor first (Refractor::leave); shadow 1, reflection and refraction 0 elsewhere.
 // common/*.wgsl, shadow_view.wgsl and blend_equations.wgsl are prepended.
 
 // Per light (GPU light order = hybrid_core::shading::lights order): its views.
@@ -18,9 +19,11 @@ struct ProbeGpu {
     centre: vec4<f32>,  // w = the far plane (the distance where nothing was seen)
     box_min: vec4<f32>, // w = 1: box-projected against [box_min, box_max]
     box_max: vec4<f32>,
-    // Rendered, first layer (+ face), see-through object (0/1), closed slab (0/1: its
-    // refraction leaves along the incident direction; hybrid_core::fallback::slab_objects).
+    // Rendered, first layer (+ face), see-through object (0/1), refractor
+    // (hybrid_core::fallback::Refractor: REFRACTOR_NONE, _SPHERE, _HULL).
     info: vec4<u32>,
+    sphere: vec4<f32>, // a sphere refractor's centre and radius
+    planes: vec4<u32>, // a hull refractor's first plane in refractor_planes and plane count
 }
 
 struct FallbackParams {
@@ -65,6 +68,8 @@ struct FallbackParams {
 @group(1) @binding(22) var st_diffuse: texture_2d<f32>;
 @group(1) @binding(23) var st_specular: texture_2d<f32>;
 @group(1) @binding(24) var st_optical: texture_2d<f32>;
+// The convex refractors' face planes: outward unit normal, w the offset (inside: n·x ≤ w).
+@group(1) @binding(25) var<storage, read> refractor_planes: array<vec4<f32>>;
 
 // ShadowMap::lit: 1 where texel (x, y), clamped to the map, is no nearer than z_ref.
 fn lit(v: ShadowViewGpu, x: i32, y: i32, z_ref: f32) -> f32 {
@@ -318,14 +323,19 @@ fn see_pixel(x: vec3<f32>) -> vec2<i32> {
     return min(vec2<i32>(uv * vec2<f32>(size)), size - vec2<i32>(1));
 }
 
-// SeeThrough::texel_along: the layer texel the refraction along unit t from p meets, or x = -1
-// where nothing lies behind p (the probe answers then). The distance starts as the surface's
-// behind p and is refined SEE_THROUGH_STEPS times against the tangent plane of the surface where
-// the point lands; a point that leaves the layer keeps the last pixel in it.
-fn see_through_texel(p: vec3<f32>, t: vec3<f32>) -> vec2<i32> {
+// SeeThrough::hit_along: what the refraction along unit t from p meets in the layer: xy its
+// texel and z = 0 (LayerHit::Texel), z = 1 the sky behind p (LayerHit::Sky), z = 2 not known
+// from the layer (LayerHit::Unknown: off it, or the ray turns away from the surface it is aimed
+// at; the probe answers). The distance starts as the surface's behind p and is refined
+// SEE_THROUGH_STEPS times against the tangent plane of the surface where the point lands; a
+// point that leaves the layer keeps the last pixel in it.
+fn hit_along(p: vec3<f32>, t: vec3<f32>) -> vec3<i32> {
     let i = see_pixel(p);
-    if i.x < 0 || textureLoad(st_object_id, i, 0).x == NO_OBJECT {
-        return vec2<i32>(-1);
+    if i.x < 0 {
+        return vec3<i32>(-1, -1, 2);
+    }
+    if textureLoad(st_object_id, i, 0).x == NO_OBJECT {
+        return vec3<i32>(-1, -1, 1);
     }
     var d = distance(textureLoad(st_position, i, 0).xyz, p);
     var j = i;
@@ -346,7 +356,7 @@ fn see_through_texel(p: vec3<f32>, t: vec3<f32>) -> vec2<i32> {
         }
         let next = dot(q - p, n) / denom;
         if !(next > 0.0 && is_finite(next)) {
-            break;
+            return vec3<i32>(-1, -1, 2);
         }
         d = next;
     }
@@ -354,7 +364,7 @@ fn see_through_texel(p: vec3<f32>, t: vec3<f32>) -> vec2<i32> {
     if last.x >= 0 {
         j = last;
     }
-    return j;
+    return vec3<i32>(j, 0);
 }
 
 // GBuffer::surface: the surface a G-buffer's targets hold at px.
@@ -381,77 +391,153 @@ fn surface_at(
     return s;
 }
 
-// A surface's fallback terms, and where its refraction looks through the see-through layer, the
-// layer texel it lands on.
-struct Terms {
-    shadow: vec3<f32>,
-    reflection: vec3<f32>,
-    // Left 0 where `texel` is set: the caller shades that texel (layer_texel; WGSL has no
-    // recursion).
-    refraction: vec3<f32>,
-    // The see-through layer's texel the refraction meets; x = -1 where it does not look through
-    // the layer.
-    texel: vec2<i32>,
-}
-
-// FallbackScene::terms of object id's surface s: shadows from the maps, reflection and
-// refraction from the object's probe (or the sky); with `through`, a planar refractive object's
-// refraction through the see-through layer (the frame's pixels; never the layer's own texels).
-fn surface_terms(id: u32, s: Surface, through: bool) -> Terms {
-    var t = Terms(vec3<f32>(1.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<i32>(-1));
-    let view = view_dir(s.position);
-    let incident = -view;
-    let view_distance = dot(s.position - frame.camera_position.xyz, frame.camera_forward.xyz);
-
+// FallbackScene::shadow: 1 minus each light's Blinn–Phong share times its maps' occlusion, for
+// surface s seen along view (towards the eye).
+fn shadow_term(s: Surface, view: vec3<f32>) -> vec3<f32> {
+    var shadow = vec3<f32>(1.0);
     let unlit = all(s.diffuse == vec3<f32>(0.0)) && all(s.specular == vec3<f32>(0.0));
-    if !unlit {
-        let light_count = min(frame.counts.x, arrayLength(&shadow_lights));
-        for (var i = 0u; i < light_count; i++) {
-            let sl = shadow_lights[i];
-            if sl.view_count == 0u {
-                continue;
-            }
-            let inc = light_incident(lights[i], s.position);
-            let n = facing(s.normal, view);
-            if all(inc.radiance == vec3<f32>(0.0)) || dot(n, inc.dir) <= 0.0 {
-                continue;
-            }
-            let v = shadow_views[view_for(sl, s.position, view_distance, lights[i].position.xyz)];
-            let vis = visibility(v, s.position, n, inc.dir);
-            if vis < 1.0 {
-                t.shadow -= blinn_phong_incident(inc.dir, inc.radiance, s, view) * (1.0 - vis);
-            }
+    if unlit {
+        return shadow;
+    }
+    let view_distance = dot(s.position - frame.camera_position.xyz, frame.camera_forward.xyz);
+    let n = facing(s.normal, view);
+    let light_count = min(frame.counts.x, arrayLength(&shadow_lights));
+    for (var i = 0u; i < light_count; i++) {
+        let sl = shadow_lights[i];
+        if sl.view_count == 0u {
+            continue;
+        }
+        let inc = light_incident(lights[i], s.position);
+        if all(inc.radiance == vec3<f32>(0.0)) || dot(n, inc.dir) <= 0.0 {
+            continue;
+        }
+        let v = shadow_views[view_for(sl, s.position, view_distance, lights[i].position.xyz)];
+        let vis = visibility(v, s.position, n, inc.dir);
+        if vis < 1.0 {
+            shadow -= blinn_phong_incident(inc.dir, inc.radiance, s, view) * (1.0 - vis);
         }
     }
+    return shadow;
+}
 
+// Refractor::exit: where a ray inside object pr's refractor, from p along unit t, leaves it:
+// the exit point and the outward normal there.
+struct Exit {
+    point: vec3<f32>,
+    normal: vec3<f32>,
+    found: bool,
+}
+
+fn refractor_exit(pr: ProbeGpu, p: vec3<f32>, t: vec3<f32>) -> Exit {
+    if pr.info.w == REFRACTOR_SPHERE {
+        // The far root of |p + t·s − c|² = r².
+        let o = p - pr.sphere.xyz;
+        let b = dot(o, t);
+        let disc = b * b - (dot(o, o) - pr.sphere.w * pr.sphere.w);
+        if disc < 0.0 {
+            return Exit(p, vec3<f32>(0.0), false);
+        }
+        let q = p + t * max(-b + sqrt(disc), 0.0);
+        return Exit(q, (q - pr.sphere.xyz) / pr.sphere.w, true);
+    }
+    if pr.info.w == REFRACTOR_HULL {
+        var best = -1.0;
+        var best_n = vec3<f32>(0.0);
+        for (var k = 0u; k < pr.planes.y; k++) {
+            let q = refractor_planes[pr.planes.x + k];
+            let along = dot(q.xyz, t);
+            if along > 1e-6 {
+                let d = max((q.w - dot(q.xyz, p)) / along, 0.0);
+                if best < 0.0 || d < best {
+                    best = d;
+                    best_n = q.xyz;
+                }
+            }
+        }
+        if best >= 0.0 {
+            return Exit(p + t * best, best_n, true);
+        }
+    }
+    return Exit(p, vec3<f32>(0.0), false);
+}
+
+// Refractor::leave: the ray refracted into the object at p along t, followed out (refracted
+// where it meets the surface from inside, reflected on and followed on total internal
+// reflection, up to REFRACTOR_BOUNCES times). Returns the exit point and direction (common's
+// Ray).
+
+fn refractor_leave(pr: ProbeGpu, p: vec3<f32>, t: vec3<f32>, env_ior: f32, ior: f32) -> Ray {
+    var r = Ray(p, t);
+    for (var b = 0u; b < REFRACTOR_BOUNCES; b++) {
+        let e = refractor_exit(pr, r.origin, r.dir);
+        if !e.found {
+            break;
+        }
+        let out = refract_or_reflect(r.dir, e.normal, env_ior, ior);
+        r = Ray(e.point, out.xyz);
+        if out.w == 0.0 {
+            break;
+        }
+    }
+    return r;
+}
+
+// A surface's reflection and refraction terms, and where its refraction looks through the
+// see-through layer, the layer texel it lands on and the ray it arrives along.
+struct Terms {
+    reflection: vec3<f32>,
+    // Left 0 where `hit.z` is 0 or 1: the caller shades that texel or the sky (layer_texel; WGSL
+    // has no recursion).
+    refraction: vec3<f32>,
+    // hit_along's answer (z = 2 where the layer was not looked up or did not know).
+    hit: vec3<i32>,
+    // The ray the layer was looked up along.
+    along: vec3<f32>,
+}
+
+// FallbackScene::reflection_refraction of object id's surface s hit along unit `incident`: its
+// probe (or the sky) along the reflected and refracted directions, the refracted ray followed
+// out of a sphere or convex refractor first; with `through`, a see-through object's refraction
+// through the layer (the frame's pixels; never the layer's own texels).
+fn reflection_refraction(id: u32, s: Surface, incident: vec3<f32>, through: bool) -> Terms {
+    var t = Terms(vec3<f32>(0.0), vec3<f32>(0.0), vec3<i32>(-1, -1, 2), incident);
     if s.reflectivity > 0.0 {
         t.reflection = look(id, s.position, normalize_or(reflect_dir(incident, s.normal), vec3<f32>(0.0)));
     }
     if s.opacity < 1.0 {
         let dir = refract_or_reflect(incident, s.normal, frame.env_ambient.w, s.ior).xyz;
-        if through && params.see_through != 0u && id < arrayLength(&probes) && probes[id].info.z != 0u {
-            // Through a slab: bent in, bent back out by the parallel face behind.
-            t.texel = see_through_texel(s.position, select(dir, incident, probes[id].info.w != 0u));
+        var r = Ray(s.position, dir);
+        let known = id < arrayLength(&probes);
+        if known && probes[id].info.w != REFRACTOR_NONE {
+            r = refractor_leave(probes[id], s.position, dir, frame.env_ambient.w, s.ior);
         }
-        if t.texel.x < 0 {
-            t.refraction = look(id, s.position, dir);
+        t.along = r.dir;
+        if through && params.see_through != 0u && known && probes[id].info.z != 0u {
+            t.hit = hit_along(r.origin, r.dir);
+        }
+        if t.hit.z == 2 {
+            t.refraction = look(id, r.origin, r.dir);
         }
     }
     return t;
 }
 
-// FallbackScene::see_through_texel: layer texel j as the blend would show it with fallbacks:
-// its lighting through eq. 4–6 with its own fallback terms (its probe, not the layer again);
-// the lighting alone where it holds no polygon surface.
-fn layer_texel(j: vec2<i32>) -> vec3<f32> {
+// FallbackScene::through_layer for a hit: the texel shaded as the trace shades a secondary hit
+// reached along `along` (unshadowed lighting combined with its own reflection and refraction,
+// from its probe), the sky along the ray where the layer shows none.
+fn layer_texel(hit: vec3<i32>, along: vec3<f32>) -> vec3<f32> {
+    let j = hit.xy;
+    if hit.z == 1 || textureLoad(st_object_id, j, 0).x == NO_OBJECT {
+        return sky(along);
+    }
     let lit = textureLoad(st_color, j, 0).xyz;
     let id = textureLoad(st_object_id, j, 0).x;
     let s = surface_at(st_position, st_normal, st_diffuse, st_specular, st_optical, j);
-    if id == NO_OBJECT || id == RT_SCENE_OBJECT || dot(s.normal, s.normal) <= 0.0 {
+    if id == RT_SCENE_OBJECT || dot(s.normal, s.normal) <= 0.0 {
         return lit;
     }
-    let t = surface_terms(id, s, false);
-    return blend_pixel(lit, t.shadow, t.reflection, t.refraction, textureLoad(st_optical, j, 0).xyz, 1.0);
+    let t = reflection_refraction(id, s, along, false);
+    return combine(lit, t.reflection, t.refraction, s.reflectivity, 1.0 - s.opacity);
 }
 
 @compute @workgroup_size(8, 8)
@@ -461,17 +547,21 @@ fn cs_fallback(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let px = vec2<i32>(gid.xy);
-    var t = Terms(vec3<f32>(1.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<i32>(-1));
+    var shadow = vec3<f32>(1.0);
+    var t = Terms(vec3<f32>(0.0), vec3<f32>(0.0), vec3<i32>(-1, -1, 2), vec3<f32>(0.0));
     let id = textureLoad(g_object_id, px, 0).x;
     let normal = textureLoad(g_normal, px, 0).xyz;
     let untraced = textureLoad(g_mask, px, 0).x < MASK_EPSILON && id != NO_OBJECT && id != RT_SCENE_OBJECT;
     if untraced && dot(normal, normal) > 0.0 {
-        t = surface_terms(id, surface_at(g_position, g_normal, g_diffuse, g_specular, g_optical, px), true);
-        if t.texel.x >= 0 {
-            t.refraction = layer_texel(t.texel);
+        let s = surface_at(g_position, g_normal, g_diffuse, g_specular, g_optical, px);
+        let view = view_dir(s.position);
+        shadow = shadow_term(s, view);
+        t = reflection_refraction(id, s, -view, true);
+        if t.hit.z != 2 {
+            t.refraction = layer_texel(t.hit, t.along);
         }
     }
-    textureStore(out_shadow, px, vec4<f32>(t.shadow, 1.0));
+    textureStore(out_shadow, px, vec4<f32>(shadow, 1.0));
     textureStore(out_reflection, px, vec4<f32>(t.reflection, 1.0));
     textureStore(out_refraction, px, vec4<f32>(t.refraction, 1.0));
 }
