@@ -688,9 +688,10 @@ pub fn object_effects_of(scene: &Scene, object_id: &[u32], mask: &[f32], fallbac
 pub const PLANAR_THICKNESS: f32 = 0.05;
 
 /// Per object: whether its refraction looks through the see-through layer ([`SeeThrough`])
-/// instead of its probe: a refractive object that is planar ([`PLANAR_THICKNESS`]). A probe
-/// sees such an object's background (a pool's floor, what lies behind a window) from one point
-/// and at grazing angles, blurred; the see-through layer sees it from the camera, sharp.
+/// instead of its probe: a refractive object that is planar ([`PLANAR_THICKNESS`]) or a convex
+/// polyhedron ([`Refractor::Hull`]). A probe sees such an object's background (a pool's floor,
+/// what lies behind a window) from one point and at grazing angles, blurred; the see-through
+/// layer sees it from the camera, sharp.
 pub fn see_through_objects(prepared: &PreparedScene, refractors: &[Option<Refractor>]) -> Vec<bool> {
     let scene = prepared.scene;
     scene
@@ -893,11 +894,11 @@ pub fn see_through_view(camera: &Camera, width: u32, height: u32) -> (Camera, u3
 }
 
 /// The see-through layer: the frame's view, widened ([`see_through_view`]), rendered with the
-/// raster path without the planar refractive objects ([`see_through_objects`]), lit. A planar
+/// raster path without the see-through objects ([`see_through_objects`]), lit. Such an
 /// object's refraction ray from `p` along `t` is intersected with the layer's surfaces (each
 /// step: with the tangent plane of the surface where the current guess lands on screen); the
-/// texel it lands on is then shaded as a pixel of the frame would be with fallbacks
-/// ([`FallbackScene::pixel`]): its lighting with its own shadows, reflections and refractions.
+/// texel it lands on is then shaded as the trace shades a secondary hit
+/// ([`FallbackScene::through_layer`]): its lighting with its own reflection and refraction.
 pub struct SeeThrough<'a> {
     pub view_proj: Mat4,
     /// The layer's G-buffer (its width and height are the layer's).
@@ -950,16 +951,20 @@ impl SeeThrough<'_> {
         if let Some(k) = self.pixel_of(p + t * d) {
             j = k;
         }
-        if j < self.color.len() { LayerHit::Texel(j) } else { LayerHit::Unknown }
+        match g.object_id.get(j) {
+            Some(&crate::NO_OBJECT) => LayerHit::Sky,
+            Some(_) if j < self.color.len() => LayerHit::Texel(j),
+            _ => LayerHit::Unknown,
+        }
     }
 }
 
 /// What a ray looked up in the see-through layer meets ([`SeeThrough::hit_along`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LayerHit {
-    /// The surface at this layer texel (the sky where the texel has none).
+    /// The surface at this layer texel.
     Texel(usize),
-    /// Nothing: the layer shows the sky behind the ray's start.
+    /// Nothing: the layer shows the sky behind the ray's start or where the ray lands.
     Sky,
     /// Not known from the layer (the start is off it, or the ray turns away from the surfaces
     /// it is aimed at): the object's probe answers.
@@ -980,15 +985,15 @@ pub struct FallbackScene<'a> {
     pub see_through_objects: &'a [bool],
     /// Per object: the shape a refraction ray leaves it by ([`refractors`]), bent a second time.
     pub refractors: &'a [Option<Refractor>],
-    /// The see-through layer, when a planar refractive object needed it this frame.
+    /// The see-through layer, when a see-through object needed it this frame.
     pub see_through: Option<SeeThrough<'a>>,
 }
 
 impl FallbackScene<'_> {
     /// The fallback terms of a pixel covered by object `object` with surface `s`:
     /// `(shadow, reflection, refraction)`, the same quantities the trace stage writes, from the
-    /// shadow maps, the object's probe and (planar refractive objects) the see-through layer
-    /// instead of rays.
+    /// shadow maps, the object's probe and (see-through objects) the see-through layer instead
+    /// of rays.
     #[inline(always)]
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
         let incident = self.camera.incident_towards(s.position);
@@ -1003,9 +1008,9 @@ impl FallbackScene<'_> {
     /// behind `p`; `None` off the layer (the probe answers then).
     pub fn through_layer(&self, st: &SeeThrough, p: Vec3, t: Vec3) -> Option<Vec3> {
         let j = match st.hit_along(p, t) {
-            LayerHit::Texel(j) if st.layer.object_id[j] != crate::NO_OBJECT => j,
+            LayerHit::Texel(j) => j,
             // The sky along the ray (the layer's sky texels are along the camera's rays).
-            LayerHit::Texel(_) | LayerHit::Sky => return Some(sky(&self.scene.environment, &self.scene.textures, t)),
+            LayerHit::Sky => return Some(sky(&self.scene.environment, &self.scene.textures, t)),
             LayerHit::Unknown => return None,
         };
         let (g, lit) = (st.layer, st.color[j]);
@@ -1051,17 +1056,17 @@ impl FallbackScene<'_> {
     }
 
     /// The reflection and refraction terms of object `object`'s surface `s` hit along unit
-    /// `incident`: its probe (the sky without one), or for a planar refractive object the
-    /// see-through layer when given.
+    /// `incident`: its probe (the sky without one), or for a see-through object the see-through
+    /// layer when given; a refraction is first followed out of the object's [`Refractor`].
     #[inline(always)]
     fn reflection_refraction(&self, object: u32, s: &Surface, incident: Vec3, see_through: Option<&SeeThrough>) -> (Vec3, Vec3) {
         let scene = self.scene;
         let probe = self.probes.get(object as usize).copied().flatten();
-        let look = |dir: Vec3| match probe {
-            Some(p) => p.sample(s.position, dir),
+        let look = |from: Vec3, dir: Vec3| match probe {
+            Some(p) => p.sample(from, dir),
             None => sky(&scene.environment, &scene.textures, dir),
         };
-        let reflection = if s.reflectivity > 0.0 { look(reflect(incident, s.normal).normalize_or_zero()) } else { Vec3::ZERO };
+        let reflection = if s.reflectivity > 0.0 { look(s.position, reflect(incident, s.normal).normalize_or_zero()) } else { Vec3::ZERO };
         let refraction = if s.opacity < 1.0 {
             let (dir, _tir) = refract_or_reflect(incident, s.normal, scene.environment.ior, s.ior);
             // Bent in here; bent again where the ray leaves a sphere or a convex polyhedron (a
@@ -1075,10 +1080,7 @@ impl FallbackScene<'_> {
                 Some(st) if self.see_through_objects.get(object as usize).copied().unwrap_or(false) => self.through_layer(st, from, along),
                 _ => None,
             };
-            through.unwrap_or_else(|| match probe {
-                Some(p) => p.sample(from, along),
-                None => sky(&scene.environment, &scene.textures, along),
-            })
+            through.unwrap_or_else(|| look(from, along))
         } else {
             Vec3::ZERO
         };

@@ -163,18 +163,18 @@ impl FallbackCache {
             if !same {
                 let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
                 let lit = lighting::deferred_lighting(&g, scene, &view);
+                // What it shows gets its probe below; a kept layer's objects got theirs when it
+                // was rendered.
+                for &id in &g.object_id {
+                    if let Some(x) = needed.get_mut(id as usize) {
+                        *x = true;
+                    }
+                }
                 self.see_through = Some(SeeThroughLayer { view, gbuffer: g, lit });
                 self.see_through_renders += 1;
             }
         }
         let layer = self.see_through.as_ref().filter(|_| see_through_needed);
-        if let Some(SeeThroughLayer { gbuffer: g, .. }) = layer {
-            for &id in &g.object_id {
-                if let Some(x) = needed.get_mut(id as usize) {
-                    *x = true;
-                }
-            }
-        }
 
         // Probes of the reflective and refractive objects that need one, once each.
         for (object, need) in needed.iter().enumerate() {

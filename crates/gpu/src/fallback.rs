@@ -682,11 +682,11 @@ impl FallbackGpu {
     }
 
     /// The see-through layer of a `width` × `height` frame seen by `camera`
-    /// (`hybrid_core::fallback::SeeThrough`), when a planar refractive object is in `needed`
+    /// (`hybrid_core::fallback::SeeThrough`), when a see-through object is in `needed`
     /// (per object: has untraced pixels): the widened view (`see_through_view`) rasterized
     /// without those objects' meshes (textures at level 0) and lit, in its own submission (the
     /// frame uniforms hold its camera), every frame it is needed. Its texels are shaded with
-    /// their own fallbacks, so the objects that show in it need probes too, as on the CPU: while
+    /// their own probes, so the objects that show in it need probes too, as on the CPU: while
     /// some object's planned probe is not rendered yet, `counter` (the heuristic's count pass,
     /// whose counts the frame has already read) counts the layer's pixels per object id in that
     /// submission, read back (the host waits for the GPU then). Writes the lookups' params (the

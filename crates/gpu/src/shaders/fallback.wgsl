@@ -324,7 +324,8 @@ fn see_pixel(x: vec3<f32>) -> vec2<i32> {
 }
 
 // SeeThrough::hit_along: what the refraction along unit t from p meets in the layer: xy its
-// texel and z = 0 (LayerHit::Texel), z = 1 the sky behind p (LayerHit::Sky), z = 2 not known
+// texel and z = 0 (LayerHit::Texel), z = 1 the sky behind p or where the ray lands
+// (LayerHit::Sky), z = 2 not known
 // from the layer (LayerHit::Unknown: off it, or the ray turns away from the surface it is aimed
 // at; the probe answers). The distance starts as the surface's behind p and is refined
 // SEE_THROUGH_STEPS times against the tangent plane of the surface where the point lands; a
@@ -364,31 +365,10 @@ fn hit_along(p: vec3<f32>, t: vec3<f32>) -> vec3<i32> {
     if last.x >= 0 {
         j = last;
     }
+    if textureLoad(st_object_id, j, 0).x == NO_OBJECT {
+        return vec3<i32>(-1, -1, 1);
+    }
     return vec3<i32>(j, 0);
-}
-
-// GBuffer::surface: the surface a G-buffer's targets hold at px.
-fn surface_at(
-    position: texture_2d<f32>,
-    normal: texture_2d<f32>,
-    diffuse: texture_2d<f32>,
-    specular: texture_2d<f32>,
-    optical: texture_2d<f32>,
-    px: vec2<i32>,
-) -> Surface {
-    let d = textureLoad(diffuse, px, 0);
-    let sp = textureLoad(specular, px, 0);
-    let o = textureLoad(optical, px, 0);
-    var s: Surface;
-    s.position = textureLoad(position, px, 0).xyz;
-    s.normal = textureLoad(normal, px, 0).xyz;
-    s.diffuse = d.xyz;
-    s.opacity = d.w;
-    s.specular = sp.xyz;
-    s.shininess = sp.w;
-    s.reflectivity = o.x;
-    s.ior = o.y;
-    return s;
 }
 
 // FallbackScene::shadow: 1 minus each light's Blinn–Phong share times its maps' occlusion, for
@@ -527,7 +507,7 @@ fn reflection_refraction(id: u32, s: Surface, incident: vec3<f32>, through: bool
 // from its probe), the sky along the ray where the layer shows none.
 fn layer_texel(hit: vec3<i32>, along: vec3<f32>) -> vec3<f32> {
     let j = hit.xy;
-    if hit.z == 1 || textureLoad(st_object_id, j, 0).x == NO_OBJECT {
+    if hit.z == 1 {
         return sky(along);
     }
     let lit = textureLoad(st_color, j, 0).xyz;

@@ -38,21 +38,7 @@ const KIND_REFRACTION: u32 = 1u;
 
 /// The G-buffer surface at pixel `p` (hybrid_core::GBuffer::surface).
 fn gbuffer_surface(p: vec2<i32>) -> Surface {
-    let d = textureLoad(g_diffuse, p, 0);
-    let sp = textureLoad(g_specular, p, 0);
-    let o = textureLoad(g_optical, p, 0);
-    var s: Surface;
-    s.position = textureLoad(g_position, p, 0).xyz;
-    s.normal = textureLoad(g_normal, p, 0).xyz;
-    s.emission = vec3<f32>(0.0);
-    s.ambient = vec3<f32>(0.0);
-    s.diffuse = d.xyz;
-    s.opacity = d.w;
-    s.specular = sp.xyz;
-    s.shininess = sp.w;
-    s.reflectivity = o.x;
-    s.ior = o.y;
-    return s;
+    return surface_at(g_position, g_normal, g_diffuse, g_specular, g_optical, p);
 }
 
 /// Whether pixel `p` is traced and has a surface (else it sees the sky): 0 = not traced,

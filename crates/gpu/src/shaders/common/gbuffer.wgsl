@@ -48,3 +48,28 @@ fn gbuffer_depth_out(s: Surface, object_id: u32, depth: f32) -> GBufferDepthOut 
 fn fullscreen_vertex(i: u32) -> vec4<f32> {
     return vec4<f32>(f32(i32(i & 1u) * 4 - 1), f32(i32(i >> 1u) * 4 - 1), 0.0, 1.0);
 }
+
+// GBuffer::surface: the surface a G-buffer's targets hold at px (gbuffer_out's inverse; no
+// emission or ambient).
+fn surface_at(
+    position: texture_2d<f32>,
+    normal: texture_2d<f32>,
+    diffuse: texture_2d<f32>,
+    specular: texture_2d<f32>,
+    optical: texture_2d<f32>,
+    px: vec2<i32>,
+) -> Surface {
+    let d = textureLoad(diffuse, px, 0);
+    let sp = textureLoad(specular, px, 0);
+    let o = textureLoad(optical, px, 0);
+    var s: Surface;
+    s.position = textureLoad(position, px, 0).xyz;
+    s.normal = textureLoad(normal, px, 0).xyz;
+    s.diffuse = d.xyz;
+    s.opacity = d.w;
+    s.specular = sp.xyz;
+    s.shininess = sp.w;
+    s.reflectivity = o.x;
+    s.ior = o.y;
+    return s;
+}
