@@ -15,6 +15,7 @@
 use glam::{Mat4, Vec2, Vec3, Vec4, Vec4Swizzles};
 use hybrid_scene::{Aabb, Camera, Projection, Scene};
 
+use crate::lanes::{V3, dot3, soa};
 use crate::prepare::PreparedScene;
 use crate::shading::{FrameLights, Light, facing, lights, reflect, refract_or_reflect, sky};
 use crate::{GBuffer, Surface};
@@ -356,6 +357,20 @@ fn cascades(direction: Vec3, bounds: &Aabb, camera: &Camera, aspect: f32, settin
         .collect()
 }
 
+/// `t.floor()`, bit for bit, without its library call: x86-64's baseline (SSE2) has no rounding
+/// instruction, so `f32::floor` is a call into the compiler's software floor even inside the
+/// AVX paths. Through an integer it is exact where |t| < 2²³ (beyond, every f32 is whole).
+#[inline(always)]
+fn floor(t: f32) -> f32 {
+    if t.abs() < 8_388_608.0 {
+        let i = t as i32 as f32;
+        // −0.0 gives +0.0 here: the same texel and, as weights, the same sums.
+        if i > t { i - 1.0 } else { i }
+    } else {
+        t.floor()
+    }
+}
+
 /// A rendered depth map: [`ShadowView`] and its texels (reversed-Z, row 0 at the top).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShadowMap {
@@ -389,11 +404,22 @@ impl ShadowMap {
     pub fn compare_bilinear(&self, uv: Vec2, z_ref: f32) -> f32 {
         let n = self.view.size as f32;
         let t = uv * n - Vec2::splat(0.5);
-        let (x0, y0) = (t.x.floor(), t.y.floor());
+        let (x0, y0) = (floor(t.x), floor(t.y));
         let (fx, fy) = (t.x - x0, t.y - y0);
         let (x0, y0) = (x0 as i32, y0 as i32);
-        let a = self.lit(x0, y0, z_ref) * (1.0 - fx) + self.lit(x0 + 1, y0, z_ref) * fx;
-        let b = self.lit(x0, y0 + 1, z_ref) * (1.0 - fx) + self.lit(x0 + 1, y0 + 1, z_ref) * fx;
+        let size = self.view.size as i32;
+        // Inside the map (nearly every lookup) the four texels are two pairs of neighbours, read
+        // without clamping; at the border each is clamped. The same texels either way.
+        let [l00, l10, l01, l11] = if x0 >= 0 && y0 >= 0 && x0 < size - 1 && y0 < size - 1 {
+            let i = (y0 * size + x0) as usize;
+            let rows = &self.depth[i..i + size as usize + 2];
+            let lit = |d: f32| if d <= z_ref { 1.0 } else { 0.0 };
+            [lit(rows[0]), lit(rows[1]), lit(rows[size as usize]), lit(rows[size as usize + 1])]
+        } else {
+            [self.lit(x0, y0, z_ref), self.lit(x0 + 1, y0, z_ref), self.lit(x0, y0 + 1, z_ref), self.lit(x0 + 1, y0 + 1, z_ref)]
+        };
+        let a = l00 * (1.0 - fx) + l10 * fx;
+        let b = l01 * (1.0 - fx) + l11 * fx;
         a * (1.0 - fy) + b * fy
     }
 
@@ -425,6 +451,56 @@ impl ShadowMap {
         // depth_of(linear_depth(z) − bias), without the round trip: orthographic depth is affine
         // in distance, a perspective view's distance is clip w.
         let z_ref = if v.orthographic { z + bias / (v.far - v.near) } else { v.depth_of(c.w - bias) };
+        self.filtered(uv, z_ref, pcf_radius)
+    }
+
+    /// [`Self::visibility`] of four receivers (lanes) at once, each lane bit for bit the
+    /// one-receiver value: the projection, normal offset and bias four at a time (the same
+    /// operations in the same order), then each lane's texels. Lanes not in `active` give 1.
+    #[inline(always)]
+    pub fn visibility4(&self, p: V3, n: V3, to_light: V3, active: [bool; 4], pcf_radius: u32) -> [f32; 4] {
+        let v = &self.view;
+        let m = &v.view_proj;
+        // `Mat4 * Vec4`, a row at a time: ((x·px + y·py) + z·pz) + w·1.
+        let row = |j: usize, p: V3| -> Vec4 {
+            Vec4::splat(m.x_axis[j]) * p[0] + Vec4::splat(m.y_axis[j]) * p[1] + Vec4::splat(m.z_axis[j]) * p[2] + Vec4::splat(m.w_axis[j])
+        };
+        let c = [row(0, p), row(1, p), row(2, p), row(3, p)];
+        let texel = if v.orthographic { Vec4::splat(v.texel_world) } else { Vec4::splat(v.texel_world) * c[3].max(Vec4::splat(v.near)) };
+        let cos = dot3(n, to_light).max(Vec4::splat(1e-3)).min(Vec4::ONE);
+        let tan = ((Vec4::ONE - cos * cos).max(Vec4::ZERO).sqrt() / cos).min(Vec4::splat(SHADOW_MAX_SLOPE));
+        let scale = texel * SHADOW_NORMAL_OFFSET_TEXELS;
+        let o = [n[0] * scale, n[1] * scale, n[2] * scale];
+        let axes = [m.x_axis, m.y_axis, m.z_axis];
+        let c: [Vec4; 4] = std::array::from_fn(|j| {
+            let mut cj = c[j];
+            for (a, ok) in axes.iter().zip(o) {
+                cj += Vec4::splat(a[j]) * ok;
+            }
+            cj
+        });
+        let inv_w = Vec4::ONE / c[3];
+        let (u, w, z) = (c[0] * inv_w * 0.5 + 0.5, Vec4::splat(0.5) - c[1] * inv_w * 0.5, c[2] * inv_w);
+        let bias = texel * (Vec4::splat(SHADOW_BIAS_TEXELS) + Vec4::splat(SHADOW_SLOPE_BIAS_TEXELS) * tan);
+        let z_ref = if v.orthographic {
+            z + bias / (v.far - v.near)
+        } else {
+            // `depth_of(c.w − bias)`.
+            let (near, far) = (v.near, v.far);
+            Vec4::splat(near * far) / (Vec4::splat(far - near) * (c[3] - bias).max(Vec4::splat(1e-6))) - Vec4::splat(near / (far - near))
+        };
+        let (cw, u, w, z, z_ref) = (c[3].to_array(), u.to_array(), w.to_array(), z.to_array(), z_ref.to_array());
+        std::array::from_fn(|l| {
+            // The one-receiver tests, NaN included (it fails `contains`, and is not beyond).
+            let outside = !(0.0..=1.0).contains(&u[l]) || !(0.0..=1.0).contains(&w[l]) || z[l] > 1.0;
+            if !active[l] || cw[l] <= 0.0 || outside { 1.0 } else { self.filtered(Vec2::new(u[l], w[l]), z_ref[l], pcf_radius) }
+        })
+    }
+
+    /// PCF: one bilinear comparison at `uv` (radius 0) or (2r + 1)² of them a texel apart.
+    #[inline(always)]
+    fn filtered(&self, uv: Vec2, z_ref: f32, pcf_radius: u32) -> f32 {
+        let v = &self.view;
         let r = pcf_radius as i32;
         if r == 0 {
             return self.compare_bilinear(uv, z_ref);
@@ -610,7 +686,7 @@ impl Probe {
         let Some((face, uv)) = self.face_uv(d) else { return Vec3::ZERO };
         let n = self.size as i32;
         let t = uv * n as f32 - Vec2::splat(0.5);
-        let (x0, y0) = (t.x.floor(), t.y.floor());
+        let (x0, y0) = (floor(t.x), floor(t.y));
         let (fx, fy) = (t.x - x0, t.y - y0);
         let base = face * (n * n) as usize;
         let at = |x: i32, y: i32| self.texels[base + (y.clamp(0, n - 1) * n + x.clamp(0, n - 1)) as usize];
@@ -971,15 +1047,44 @@ pub enum LayerHit {
     Unknown,
 }
 
+/// A light with shadow maps, as the per-pixel lookups read it ([`shadowed_lights`]).
+#[derive(Debug, Clone, Copy)]
+pub struct ShadowedLight<'a> {
+    /// Index in [`lights`] order (and [`FrameLights`]').
+    pub light: usize,
+    /// Where a point or spot light sits (a point light's cube face is picked from it).
+    pub position: Vec3,
+    pub maps: &'a LightShadowMaps,
+}
+
+/// The lights that have maps (`maps` per light in [`lights`] order), with what the lookups need
+/// of each, gathered once per frame.
+pub fn shadowed_lights<'a>(scene: &Scene, maps: &[Option<&'a LightShadowMaps>]) -> Vec<ShadowedLight<'a>> {
+    lights(&scene.lights)
+        .enumerate()
+        .filter_map(|(light, l)| {
+            let maps = maps.get(light).copied().flatten()?;
+            let position = match l {
+                Light::Point(l) => l.position,
+                Light::Spot(l) => l.position,
+                Light::Directional(_) => Vec3::ZERO,
+            };
+            Some(ShadowedLight { light, position, maps })
+        })
+        .collect()
+}
+
 /// Everything the per-pixel fallback reads: the lights, their maps, the probes.
 pub struct FallbackScene<'a> {
     pub scene: &'a Scene,
     pub frame_lights: &'a FrameLights,
-    /// Per light (in [`lights`] order): its maps, if it casts shadows.
-    pub shadow_maps: Vec<Option<&'a LightShadowMaps>>,
+    /// The lights that cast shadows and have maps ([`shadowed_lights`]).
+    pub shadowed: Vec<ShadowedLight<'a>>,
     /// Per object: its probe, if it reflects or refracts.
     pub probes: Vec<Option<&'a Probe>>,
     pub camera: &'a Camera,
+    /// `camera.forward()`, once per frame (the cascades are picked by distance along it).
+    pub camera_forward: Vec3,
     pub pcf_radius: u32,
     /// Per object: whether its refraction uses `see_through` ([`see_through_objects`]).
     pub see_through_objects: &'a [bool],
@@ -996,10 +1101,28 @@ impl FallbackScene<'_> {
     /// of rays.
     #[inline(always)]
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
-        let incident = self.camera.incident_towards(s.position);
+        let incident = self.incident_towards(s.position);
         let shadow = self.shadow(s, -incident);
         let (reflection, refraction) = self.reflection_refraction(object, s, incident, self.see_through.as_ref());
         (shadow, reflection, refraction)
+    }
+
+    /// [`Self::pixel`] of four pixels at once, bit for bit ([`Self::shadow4`]; reflections and
+    /// refractions one by one).
+    #[inline(always)]
+    pub fn pixel4(&self, object: [u32; 4], s: &[Surface; 4]) -> [(Vec3, Vec3, Vec3); 4] {
+        let incident: [Vec3; 4] = std::array::from_fn(|l| self.incident_towards(s[l].position));
+        let shadow = self.shadow4(s, incident.map(|i| -i));
+        std::array::from_fn(|l| {
+            let (reflection, refraction) = self.reflection_refraction(object[l], &s[l], incident[l], self.see_through.as_ref());
+            (shadow[l], reflection, refraction)
+        })
+    }
+
+    /// `camera.incident_towards(p)`, with the camera's forward direction made once.
+    #[inline(always)]
+    fn incident_towards(&self, p: Vec3) -> Vec3 {
+        if self.camera.is_orthographic() { self.camera_forward } else { (p - self.camera.position).normalize_or(self.camera_forward) }
     }
 
     /// What a refraction ray along unit `t` sees through the see-through layer from `p`, shaded
@@ -1027,29 +1150,62 @@ impl FallbackScene<'_> {
     /// The shadow term of surface `s` seen along `view` (towards the eye): 1 minus each
     /// light's Blinn–Phong share times its shadow maps' occlusion.
     #[inline(always)]
-    fn shadow(&self, s: &Surface, view: Vec3) -> Vec3 {
+    pub fn shadow(&self, s: &Surface, view: Vec3) -> Vec3 {
         let mut shadow = Vec3::ONE;
         let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
         if unlit {
             return shadow;
         }
-        let view_distance = (s.position - self.camera.position).dot(self.camera.forward());
+        let view_distance = (s.position - self.camera.position).dot(self.camera_forward);
         let n = facing(s.normal, view);
-        for (k, light) in lights(&self.scene.lights).enumerate() {
-            let Some(Some(maps)) = self.shadow_maps.get(k) else { continue };
-            let (dir, _dist, radiance) = self.frame_lights.incident_and_distance(k, s.position);
+        for light in &self.shadowed {
+            let (dir, _dist, radiance) = self.frame_lights.incident_and_distance(light.light, s.position);
             if radiance == Vec3::ZERO || n.dot(dir) <= 0.0 {
                 continue;
             }
-            let light_position = match light {
-                Light::Point(l) => l.position,
-                Light::Spot(l) => l.position,
-                Light::Directional(_) => Vec3::ZERO,
-            };
-            let Some(map) = maps.map_for(s.position, view_distance, light_position) else { continue };
+            let Some(map) = light.maps.map_for(s.position, view_distance, light.position) else { continue };
             let vis = map.visibility(s.position, n, dir, self.pcf_radius);
             if vis < 1.0 {
                 shadow -= self.frame_lights.blinn_phong_incident((dir, radiance), s, view) * (1.0 - vis);
+            }
+        }
+        shadow
+    }
+
+    /// [`Self::shadow`] of four surfaces (lanes), each lane bit for bit the one-surface value:
+    /// each light's direction and radiance four at a time, and where the four pick the same map
+    /// (neighbouring pixels nearly always do) its projection and bias four at a time too.
+    #[inline(always)]
+    pub fn shadow4(&self, s: &[Surface; 4], view: [Vec3; 4]) -> [Vec3; 4] {
+        let mut shadow = [Vec3::ONE; 4];
+        let lit: [bool; 4] = std::array::from_fn(|l| !(s[l].diffuse == Vec3::ZERO && s[l].specular == Vec3::ZERO));
+        if !lit.contains(&true) || self.shadowed.is_empty() {
+            return shadow;
+        }
+        let view_distance: [f32; 4] = std::array::from_fn(|l| (s[l].position - self.camera.position).dot(self.camera_forward));
+        let n: [Vec3; 4] = std::array::from_fn(|l| facing(s[l].normal, view[l]));
+        let (p4, n4) = (soa([s[0].position, s[1].position, s[2].position, s[3].position]), soa(n));
+        for light in &self.shadowed {
+            let (dir4, radiance4) = self.frame_lights.incident4(light.light, p4);
+            let n_dot_l = dot3(n4, dir4).to_array();
+            let (dir, radiance) = (crate::lanes::aos(dir4), crate::lanes::aos(radiance4));
+            let map: [Option<&ShadowMap>; 4] = std::array::from_fn(|l| {
+                if !lit[l] || radiance[l] == Vec3::ZERO || n_dot_l[l] <= 0.0 {
+                    return None;
+                }
+                light.maps.map_for(s[l].position, view_distance[l], light.position)
+            });
+            let Some(first) = map.iter().flatten().next() else { continue };
+            let active = map.map(|m| m.is_some());
+            let vis = if map.iter().flatten().all(|m| std::ptr::eq(*m, *first)) {
+                first.visibility4(p4, n4, dir4, active, self.pcf_radius)
+            } else {
+                std::array::from_fn(|l| map[l].map_or(1.0, |m| m.visibility(s[l].position, n[l], dir[l], self.pcf_radius)))
+            };
+            for l in 0..4 {
+                if map[l].is_some() && vis[l] < 1.0 {
+                    shadow[l] -= self.frame_lights.blinn_phong_incident((dir[l], radiance[l]), &s[l], view[l]) * (1.0 - vis[l]);
+                }
             }
         }
         shadow
@@ -1139,6 +1295,23 @@ mod tests {
             let edge = *dir + (CUBE_FACES[(f + 2) % 6].0) * 0.99;
             let (uv, _) = project(&cam.view_projection(1.0), edge).unwrap();
             assert!(uv.min_element() >= 0.0 && uv.max_element() <= 1.0, "{uv}");
+        }
+    }
+
+    #[test]
+    fn floor_is_f32_floor() {
+        let mut x = 0x1234_5678u32;
+        let mut values = vec![0.0, -0.5, 0.5, -1.0, 1.0, -1.5, 1023.5, -0.000_1, 8_388_607.5, 8_388_608.0, -8_388_609.0, 3e9, -3e9];
+        for _ in 0..100_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            values.push(f32::from_bits(x));
+            values.push((x % 4_000_000) as f32 / 1000.0 - 2000.0);
+        }
+        for t in values {
+            let (a, b) = (floor(t), t.floor());
+            assert!(a == b || (a.is_nan() && b.is_nan()), "{t}: {a} vs {b}");
         }
     }
 

@@ -197,6 +197,13 @@ impl FrameLights {
         self.lights[k].incident_and_distance(p)
     }
 
+    /// [`Self::incident_and_distance`]'s direction and radiance of light `k` at four points
+    /// (lanes), each lane bit for bit the one-point value.
+    #[inline]
+    pub fn incident4(&self, k: usize, p: V3) -> (V3, V3) {
+        self.lights[k].incident4(p)
+    }
+
     /// [`Light::blinn_phong`], bit for bit, for light arriving as `(direction, radiance)` already
     /// evaluated (by [`Self::incident_and_distance`]) at `s.position`.
     #[inline]

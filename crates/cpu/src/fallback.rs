@@ -11,7 +11,7 @@ use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
 use hybrid_core::fallback::{
     FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, Refractor, SeeThrough, ShadowMap, ShadowView, caster_meshes,
-    plan_light_views, plan_probes, project, refractors, scene_bounds, see_through_objects, see_through_view,
+    plan_light_views, plan_probes, project, refractors, scene_bounds, see_through_objects, see_through_view, shadowed_lights,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
@@ -192,9 +192,10 @@ impl FallbackCache {
         let fb = FallbackScene {
             scene,
             frame_lights: &frame_lights,
-            shadow_maps: self.maps.iter().map(Option::as_ref).collect(),
+            shadowed: shadowed_lights(scene, &self.maps.iter().map(Option::as_ref).collect::<Vec<_>>()),
             probes: self.probes.iter().map(Option::as_ref).collect(),
             camera,
+            camera_forward: camera.forward(),
             pcf_radius: self.settings.pcf_radius,
             see_through_objects: &self.see_through_objects,
             refractors: &self.refractors,
@@ -211,14 +212,33 @@ impl FallbackCache {
                 crate::isa::dispatch(
                     #[inline(always)]
                     || {
+                        // The chunk's pixels the trace stage left out, four at a time
+                        // (`FallbackScene::pixel4`), the rest one by one.
+                        let mut todo = [0usize; CHUNK];
+                        let mut count = 0;
                         for k in 0..s.len() {
                             let i = c * CHUNK + k;
                             let id = gbuffer.object_id[i];
-                            if gbuffer.mask[i] >= MASK_EPSILON || !is_polygon(id) {
+                            let has_normal = gbuffer.normal[i].length_squared() > 0.0;
+                            if gbuffer.mask[i] >= MASK_EPSILON || !is_polygon(id) || !has_normal {
                                 continue;
                             }
-                            let Some(surface) = gbuffer.surface(i).filter(|s| s.normal.length_squared() > 0.0) else { continue };
-                            (s[k], m[k], r[k]) = fb.pixel(id, &surface);
+                            todo[count] = k;
+                            count += 1;
+                        }
+                        let todo = &todo[..count];
+                        let surface = |k: usize| gbuffer.surface(c * CHUNK + k).expect("a covered pixel");
+                        let id = |k: usize| gbuffer.object_id[c * CHUNK + k];
+                        let quads = todo.chunks_exact(4);
+                        let rest = quads.remainder();
+                        for q in quads {
+                            let out = fb.pixel4([id(q[0]), id(q[1]), id(q[2]), id(q[3])], &[surface(q[0]), surface(q[1]), surface(q[2]), surface(q[3])]);
+                            for (&k, o) in q.iter().zip(out) {
+                                (s[k], m[k], r[k]) = o;
+                            }
+                        }
+                        for &k in rest {
+                            (s[k], m[k], r[k]) = fb.pixel(id(k), &surface(k));
                         }
                     },
                 )
