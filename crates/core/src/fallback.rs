@@ -1315,6 +1315,100 @@ mod tests {
         }
     }
 
+    /// The demo scene's lights (a sun's cascades, a point light's cube, a spot map) over maps
+    /// of random depth, and random surfaces in and around them: [`FallbackScene::shadow4`] is
+    /// [`FallbackScene::shadow`] lane by lane, bit for bit, whether the four pick one map or
+    /// several, with and without PCF, with unlit and back-facing lanes.
+    #[test]
+    fn four_lane_shadows_are_the_one_pixel_shadows() {
+        use rand::{Rng, SeedableRng};
+        let scene = hybrid_scene::demo_scene();
+        let camera = scene.camera;
+        let bounds = Aabb { min: camera.target - Vec3::splat(8.0), max: camera.target + Vec3::splat(8.0) };
+        let settings = FallbackSettings { shadow_map_size: 64, cube_shadow_size: 32, ..FallbackSettings::default() };
+        let mut rng = rand::rngs::StdRng::seed_from_u64(18);
+        let maps: Vec<Option<LightShadowMaps>> = {
+            let mut maps = vec![None; lights(&scene.lights).count()];
+            for lv in plan_light_views(&scene, &bounds, &camera, 16.0 / 9.0, &settings) {
+                let maps_of_light = lv
+                    .views
+                    .iter()
+                    .map(|view| ShadowMap { view: *view, depth: (0..view.size * view.size).map(|_| rng.random_range(0.0..1.0)).collect() })
+                    .collect();
+                maps[lv.light] = Some(LightShadowMaps { light: lv.light, kind: lv.kind, maps: maps_of_light });
+            }
+            maps
+        };
+        assert!(maps.iter().flatten().count() >= 3, "the demo's sun, point and spot light cast shadows");
+        let frame_lights = FrameLights::new(&scene.lights, &scene.environment);
+        let map_refs: Vec<Option<&LightShadowMaps>> = maps.iter().map(Option::as_ref).collect();
+        let mut fb = FallbackScene {
+            scene: &scene,
+            frame_lights: &frame_lights,
+            shadowed: shadowed_lights(&scene, &map_refs),
+            probes: Vec::new(),
+            camera: &camera,
+            camera_forward: camera.forward(),
+            pcf_radius: 0,
+            see_through_objects: &[],
+            refractors: &[],
+            see_through: None,
+        };
+        let random_surface = |rng: &mut rand::rngs::StdRng, near: Option<Vec3>| {
+            let position = match near {
+                // A neighbour: the same map nearly always.
+                Some(p) => p + Vec3::new(rng.random_range(-0.05..0.05), rng.random_range(-0.05..0.05), rng.random_range(-0.05..0.05)),
+                None => bounds.min + (bounds.max - bounds.min) * Vec3::new(rng.random(), rng.random(), rng.random()),
+            };
+            let normal =
+                Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize_or(Vec3::Y);
+            let unlit = rng.random_range(0..10) == 0;
+            Surface {
+                position,
+                normal,
+                emission: Vec3::ZERO,
+                ambient: Vec3::splat(0.2),
+                diffuse: if unlit { Vec3::ZERO } else { Vec3::new(rng.random(), rng.random(), rng.random()) },
+                opacity: 1.0,
+                specular: if unlit || rng.random() { Vec3::ZERO } else { Vec3::splat(rng.random()) },
+                shininess: rng.random(),
+                reflectivity: 0.0,
+                ior: 1.0,
+            }
+        };
+        let (mut shadowed_lanes, mut mixed_quads) = (0, 0);
+        for pcf in [0, 1] {
+            fb.pcf_radius = pcf;
+            for quad in 0..4000 {
+                let first = random_surface(&mut rng, None);
+                let neighbours = quad % 2 == 0;
+                let s: [Surface; 4] = std::array::from_fn(|l| {
+                    if l == 0 {
+                        first
+                    } else if neighbours {
+                        random_surface(&mut rng, Some(first.position))
+                    } else {
+                        random_surface(&mut rng, None)
+                    }
+                });
+                let view: [Vec3; 4] = std::array::from_fn(|l| -(s[l].position - camera.position).normalize());
+                let four = fb.shadow4(&s, view);
+                for l in 0..4 {
+                    let one = fb.shadow(&s[l], view[l]);
+                    assert_eq!(
+                        four[l].to_array().map(f32::to_bits),
+                        one.to_array().map(f32::to_bits),
+                        "quad {quad} lane {l}: {} vs {one}",
+                        four[l]
+                    );
+                    shadowed_lanes += usize::from(one != Vec3::ONE);
+                }
+                mixed_quads += usize::from(!neighbours);
+            }
+        }
+        assert!(shadowed_lanes > 1000 && mixed_quads > 1000, "{shadowed_lanes} shadowed lanes, {mixed_quads} quads over several maps");
+    }
+
     #[test]
     fn bilinear_comparison_by_hand() {
         // 2×2 map: left column depth 0.8 (an occluder near the light), right column 0.2.

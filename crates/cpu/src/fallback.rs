@@ -232,7 +232,10 @@ impl FallbackCache {
                         let quads = todo.chunks_exact(4);
                         let rest = quads.remainder();
                         for q in quads {
-                            let out = fb.pixel4([id(q[0]), id(q[1]), id(q[2]), id(q[3])], &[surface(q[0]), surface(q[1]), surface(q[2]), surface(q[3])]);
+                            let out = fb.pixel4(
+                                [id(q[0]), id(q[1]), id(q[2]), id(q[3])],
+                                &[surface(q[0]), surface(q[1]), surface(q[2]), surface(q[3])],
+                            );
                             for (&k, o) in q.iter().zip(out) {
                                 (s[k], m[k], r[k]) = o;
                             }
