@@ -610,13 +610,22 @@ impl Probe {
     #[inline]
     fn face_uv(&self, d: Vec3) -> Option<(usize, Vec2)> {
         let face = cube_face(d);
-        let (forward, up) = CUBE_FACES[face];
-        let right = forward.cross(up);
-        let z = d.dot(forward);
+        // `d · forward`, `d · right` and `d · up` of the face (`right = forward × up`): the axes of
+        // `CUBE_FACES` are signed unit axes, so each product is a signed component of `d`, the
+        // same value for finite `d` (only a zero's sign can differ, and it moves neither the
+        // `z ≤ 0` test nor the UV).
+        let (z, right, up) = match face {
+            0 => (d.x, -d.z, -d.y),
+            1 => (-d.x, d.z, -d.y),
+            2 => (d.y, d.x, d.z),
+            3 => (-d.y, d.x, -d.z),
+            4 => (d.z, d.x, -d.y),
+            _ => (-d.z, -d.x, -d.y),
+        };
         if z <= 0.0 {
             return None;
         }
-        Some((face, Vec2::new(0.5 + 0.5 * d.dot(right) / z, 0.5 - 0.5 * d.dot(up) / z)))
+        Some((face, Vec2::new(0.5 + 0.5 * right / z, 0.5 - 0.5 * up / z)))
     }
 
     /// The distance the probe saw along `d` (nearest texel; `plan.far` for nothing).
@@ -1295,6 +1304,26 @@ mod tests {
             let edge = *dir + (CUBE_FACES[(f + 2) % 6].0) * 0.99;
             let (uv, _) = project(&cam.view_projection(1.0), edge).unwrap();
             assert!(uv.min_element() >= 0.0 && uv.max_element() <= 1.0, "{uv}");
+        }
+    }
+
+    #[test]
+    fn face_uv_is_the_faces_dot_products() {
+        let probe = Probe::new(ProbePlan { object: 0, centre: Vec3::ZERO, near: 0.1, far: 10.0, parallax_box: None }, 4);
+        let mut rng = crate::test_rng::Rng(7);
+        for k in 0..200_000 {
+            let d = if k % 4 == 0 {
+                // On the faces' edges and axes, zeros included.
+                Vec3::new((rng.next_u64() % 5) as f32 - 2.0, (rng.next_u64() % 5) as f32 - 2.0, (rng.next_u64() % 5) as f32 - 2.0)
+            } else {
+                Vec3::new(rng.f() * 2.0 - 1.0, rng.f() * 2.0 - 1.0, rng.f() * 2.0 - 1.0) * 100.0
+            };
+            let face = cube_face(d);
+            let (forward, up) = CUBE_FACES[face];
+            let right = forward.cross(up);
+            let z = d.dot(forward);
+            let by_dots = (z > 0.0).then(|| (face, Vec2::new(0.5 + 0.5 * d.dot(right) / z, 0.5 - 0.5 * d.dot(up) / z)));
+            assert_eq!(probe.face_uv(d), by_dots, "{d}");
         }
     }
 
