@@ -16,7 +16,7 @@ use glam::{Mat4, Vec2, Vec3, Vec4, Vec4Swizzles};
 use hybrid_scene::{Aabb, Camera, Projection, Scene};
 
 use crate::lanes::{V3, dot3, soa};
-use crate::prepare::PreparedScene;
+use crate::prepare::{PreparedScene, floor};
 use crate::shading::{FrameLights, Light, facing, lights, reflect, refract_or_reflect, sky};
 use crate::{GBuffer, Surface};
 
@@ -355,20 +355,6 @@ fn cascades(direction: Vec3, bounds: &Aabb, camera: &Camera, aspect: f32, settin
             ShadowView::new(&cam, settings.shadow_map_size, end)
         })
         .collect()
-}
-
-/// `t.floor()`, bit for bit, without its library call: x86-64's baseline (SSE2) has no rounding
-/// instruction, so `f32::floor` is a call into the compiler's software floor even inside the
-/// AVX paths. Through an integer it is exact where |t| < 2²³ (beyond, every f32 is whole).
-#[inline(always)]
-fn floor(t: f32) -> f32 {
-    if t.abs() < 8_388_608.0 {
-        let i = t as i32 as f32;
-        // −0.0 gives +0.0 here: the same texel and, as weights, the same sums.
-        if i > t { i - 1.0 } else { i }
-    } else {
-        t.floor()
-    }
 }
 
 /// A rendered depth map: [`ShadowView`] and its texels (reversed-Z, row 0 at the top).
@@ -1110,7 +1096,7 @@ impl FallbackScene<'_> {
     /// of rays.
     #[inline(always)]
     pub fn pixel(&self, object: u32, s: &Surface) -> (Vec3, Vec3, Vec3) {
-        let incident = self.incident_towards(s.position);
+        let incident = self.camera.incident_towards(s.position);
         let shadow = self.shadow(s, -incident);
         let (reflection, refraction) = self.reflection_refraction(object, s, incident, self.see_through.as_ref());
         (shadow, reflection, refraction)
@@ -1120,18 +1106,12 @@ impl FallbackScene<'_> {
     /// refractions one by one).
     #[inline(always)]
     pub fn pixel4(&self, object: [u32; 4], s: &[Surface; 4]) -> [(Vec3, Vec3, Vec3); 4] {
-        let incident: [Vec3; 4] = std::array::from_fn(|l| self.incident_towards(s[l].position));
+        let incident: [Vec3; 4] = std::array::from_fn(|l| self.camera.incident_towards(s[l].position));
         let shadow = self.shadow4(s, incident.map(|i| -i));
         std::array::from_fn(|l| {
             let (reflection, refraction) = self.reflection_refraction(object[l], &s[l], incident[l], self.see_through.as_ref());
             (shadow[l], reflection, refraction)
         })
-    }
-
-    /// `camera.incident_towards(p)`, with the camera's forward direction made once.
-    #[inline(always)]
-    fn incident_towards(&self, p: Vec3) -> Vec3 {
-        if self.camera.is_orthographic() { self.camera_forward } else { (p - self.camera.position).normalize_or(self.camera_forward) }
     }
 
     /// What a refraction ray along unit `t` sees through the see-through layer from `p`, shaded
@@ -1324,23 +1304,6 @@ mod tests {
             let z = d.dot(forward);
             let by_dots = (z > 0.0).then(|| (face, Vec2::new(0.5 + 0.5 * d.dot(right) / z, 0.5 - 0.5 * d.dot(up) / z)));
             assert_eq!(probe.face_uv(d), by_dots, "{d}");
-        }
-    }
-
-    #[test]
-    fn floor_is_f32_floor() {
-        let mut x = 0x1234_5678u32;
-        let mut values = vec![0.0, -0.5, 0.5, -1.0, 1.0, -1.5, 1023.5, -0.000_1, 8_388_607.5, 8_388_608.0, -8_388_609.0, 3e9, -3e9];
-        for _ in 0..100_000 {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            values.push(f32::from_bits(x));
-            values.push((x % 4_000_000) as f32 / 1000.0 - 2000.0);
-        }
-        for t in values {
-            let (a, b) = (floor(t), t.floor());
-            assert!(a == b || (a.is_nan() && b.is_nan()), "{t}: {a} vs {b}");
         }
     }
 

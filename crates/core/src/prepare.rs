@@ -321,9 +321,11 @@ fn sample_map(t: &Texture, uv: Vec2, footprint: f32) -> Vec4 {
 }
 
 /// `x.floor()`, bit for bit (signed zeros included), without a library call or a saturating
-/// integer cast on targets lacking SSE4.1.
+/// integer cast on targets lacking SSE4.1: x86-64's baseline (SSE2) has no rounding instruction,
+/// so `f32::floor` is a call into the compiler's software floor even inside the AVX paths
+/// (texture sampling here, the fallbacks' bilinear lookups).
 #[inline(always)]
-fn floor(x: f32) -> f32 {
+pub(crate) fn floor(x: f32) -> f32 {
     const BIG: f32 = 8_388_608.0; // 2²³: every float at or above it is an integer
     let a = x.abs();
     if a < BIG {

@@ -88,7 +88,9 @@ impl Camera {
     /// the forward direction for an orthographic camera (or `p` at the eye).
     #[inline]
     pub fn incident_towards(&self, p: Vec3) -> Vec3 {
-        if self.is_orthographic() { self.forward() } else { (p - self.position).normalize_or(self.forward()) }
+        // `normalize_or(self.forward())`, with the forward direction (a normalisation of its
+        // own) made only when it is needed: this runs once per pixel in the trace and fallbacks.
+        if self.is_orthographic() { self.forward() } else { (p - self.position).try_normalize().unwrap_or_else(|| self.forward()) }
     }
 }
 
