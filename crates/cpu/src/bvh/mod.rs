@@ -174,8 +174,11 @@ pub struct SceneBvh {
 }
 
 mod build;
+mod packet;
 mod shadow;
 mod traverse;
+
+pub use packet::{PACKET, PacketRay};
 
 use build::*;
 use traverse::*;
@@ -300,6 +303,126 @@ mod tests {
             }
         }
         assert!(hits > 1000, "too few hits to test anything: {hits}");
+    }
+
+    fn hit_bits(h: Option<Hit>) -> Option<(u32, TriangleRef, [u32; 3])> {
+        h.map(|h| (h.t.to_bits(), h.triangle, h.bary.to_array().map(f32::to_bits)))
+    }
+
+    /// Every ray of `rays`, traced in packets of up to 16 (in order), answers bit for bit as
+    /// `closest_hit` does; returns the number of hits.
+    fn packets_match_single_rays(bvh: &SceneBvh, rays: &[PacketRay], t_min: f32) -> usize {
+        let mut hits = 0;
+        for (c, chunk) in rays.chunks(PACKET).enumerate() {
+            let packet = bvh.closest_hits(chunk, t_min);
+            for (i, &(o, d, t_max)) in chunk.iter().enumerate() {
+                let single = bvh.closest_hit(o, d, t_min, t_max);
+                assert_eq!(hit_bits(packet[i]), hit_bits(single), "packet {c}, ray {i}: {o} {d} {t_max}");
+                hits += single.is_some() as usize;
+            }
+            assert!(packet[chunk.len()..].iter().all(Option::is_none));
+        }
+        hits
+    }
+
+    #[test]
+    fn packets_answer_as_single_rays_do() {
+        let scene = soup_scene(3000, 7, vec![Material::default()]);
+        let p = PreparedScene::new(&scene);
+        let bvh = SceneBvh::build(&p);
+        let mut rng = StdRng::seed_from_u64(21);
+        // Coherent: 4×4 fans of rays from one eye (some straddling an axis, so split by
+        // octant), with and without a segment end, some unnormalised.
+        let mut rays = Vec::new();
+        for k in 0..300 {
+            let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0));
+            let centre =
+                (Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0)) - eye).normalize();
+            let (right, up) = centre.any_orthonormal_pair();
+            let spread = if k % 5 == 0 { 0.3 } else { 0.01 };
+            let t_max = if k % 3 == 0 { rng.random_range(2.0..20.0) } else { f32::INFINITY };
+            for j in 0..16 {
+                let (x, y) = ((j % 4) as f32 - 1.5, (j / 4) as f32 - 1.5);
+                let d = centre + (right * x + up * y) * spread;
+                let d = if k % 7 == 0 { d * 3.0 } else { d.normalize() };
+                rays.push((eye + right * (x * 1e-3), d, t_max));
+            }
+        }
+        let coherent = packets_match_single_rays(&bvh, &rays, 0.0);
+        // Incoherent, with directions along axes and zero components (infinite inverses),
+        // in packets of every length.
+        let mut rays = Vec::new();
+        for k in 0..2000 {
+            let (o, mut d) = random_ray(&mut rng);
+            if k % 11 == 0 {
+                d[k % 3] = 0.0;
+            }
+            if k % 13 == 0 {
+                d = [Vec3::X, Vec3::NEG_Y, Vec3::Z][k % 3];
+            }
+            rays.push((o, d, if k % 2 == 0 { f32::INFINITY } else { rng.random_range(1.0..15.0) }));
+        }
+        let mut incoherent = 0;
+        let mut at = 0;
+        for len in (1..=PACKET).cycle() {
+            if at + len > rays.len() {
+                break;
+            }
+            incoherent += packets_match_single_rays(&bvh, &rays[at..at + len], 0.5);
+            at += len;
+        }
+        assert!(coherent > 1000 && incoherent > 400, "too few hits to test anything: {coherent}, {incoherent}");
+    }
+
+    #[test]
+    fn ties_go_to_the_lowest_slot_in_packets_and_single_rays() {
+        // Overlapping triangles with integer corners in the plane z = 0, among vertical walls:
+        // a ray straight down hits every flat triangle over its point at exactly t = 4 (all of
+        // Möller–Trumbore's arithmetic is exact there), and the walls (which such rays never
+        // hit) raise some leaves' boxes, so the traversal reaches the tied triangles in an order
+        // that is not their slots' order.
+        let mut rng = StdRng::seed_from_u64(31);
+        let mut mesh = Mesh { material: 0, ..Default::default() };
+        let corner = |mesh: &mut Mesh, p: Vec3| {
+            mesh.positions.push(p);
+            mesh.uvs.push(Vec2::ZERO);
+            mesh.positions.len() as u32 - 1
+        };
+        for k in 0..600 {
+            let (x, y) = (rng.random_range(0..10) as f32, rng.random_range(0..10) as f32);
+            let tri = if k % 3 == 0 {
+                let h = rng.random_range(1..4) as f32;
+                [Vec3::new(x, y, 0.0), Vec3::new(x + 2.0, y, 0.0), Vec3::new(x + 1.0, y, h)]
+            } else {
+                let (w, h) = (rng.random_range(1..5) as f32, rng.random_range(1..5) as f32);
+                [Vec3::new(x, y, 0.0), Vec3::new(x + w, y, 0.0), Vec3::new(x, y + h, 0.0)]
+            };
+            let i = tri.map(|p| corner(&mut mesh, p));
+            mesh.indices.push(i);
+        }
+        let mut scene = soup_scene(0, 1, vec![Material::default()]);
+        scene.objects[0].meshes = vec![mesh];
+        let p = PreparedScene::new(&scene);
+        let bvh = SceneBvh::build(&p);
+        let rays: Vec<PacketRay> = (0..40 * 40)
+            .map(|k| (Vec3::new((k % 40) as f32 * 0.25 + 0.1, (k / 40) as f32 * 0.25 + 0.05, 4.0), Vec3::NEG_Z, f32::INFINITY))
+            .collect();
+        assert!(packets_match_single_rays(&bvh, &rays, 0.0) > 1000);
+        // Where several triangles tie, the one in the lowest slot wins.
+        let mut ties = 0;
+        for &(o, d, _) in &rays {
+            let Some(hit) = bvh.closest_hit(o, d, 0.0, f32::INFINITY) else { continue };
+            let r = RayPre::new(Vec3A::from(o), Vec3A::from(d));
+            let slots: Vec<usize> = (0..bvh.slot_ref.len())
+                .filter(|&s| {
+                    let (t, _, _, m) = intersect4_upto(&bvh.packs[s / 4], &r, 0.0, f32::INFINITY);
+                    m >> (s % 4) & 1 != 0 && t[s % 4] == hit.t
+                })
+                .collect();
+            ties += (slots.len() > 1) as usize;
+            assert_eq!(bvh.slot_ref[slots[0]], hit.triangle, "ray through {o}: slots {slots:?}");
+        }
+        assert!(ties > 500, "too few ties to test the rule: {ties}");
     }
 
     #[test]

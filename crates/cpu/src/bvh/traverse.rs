@@ -22,8 +22,12 @@ impl SceneBvh {
     #[inline(always)]
     pub(super) fn closest_hit_with(&self, stack: &mut [u64; STACK_LEN], origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
         let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
+        // The hit is the least (t, slot) pair, whatever order the leaves come in (so that a
+        // packet, which visits them in another order, finds the same one): a triangle at the
+        // closest distance so far still wins if its slot is lower. Slot 0 to start with means
+        // that nothing ties with `t_max` itself, so a hit was found iff `best_t < t_max`.
         let mut best_t = t_max;
-        let mut best = usize::MAX;
+        let mut best = 0usize;
         let mut best_uv = (0.0f32, 0.0f32);
         // Entries still to visit are `stack[..sp]`, indexed modulo the power-of-two length (no
         // bounds check; it cannot fill, see `STACK_LEN`).
@@ -72,15 +76,16 @@ impl SceneBvh {
                 let range = leaf_packs(cur);
                 let first = range.start;
                 for (pi, pack) in self.packs[range].iter().enumerate() {
-                    let (t, u, v, mut mask) = intersect4(pack, &r, t_min, best_t);
+                    let (t, u, v, mut mask) = intersect4_upto(pack, &r, t_min, best_t);
                     if mask != 0 {
                         let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
                         while mask != 0 {
                             let lane = mask.trailing_zeros() as usize & 3;
                             mask &= mask - 1;
-                            if t[lane] < best_t {
+                            let slot = (first + pi) * 4 + lane;
+                            if t[lane] < best_t || (t[lane] == best_t && slot < best) {
                                 best_t = t[lane];
-                                best = (first + pi) * 4 + lane;
+                                best = slot;
                                 best_uv = (u[lane], v[lane]);
                             }
                         }
@@ -90,7 +95,7 @@ impl SceneBvh {
             // Pop the next entry that starts before the closest hit so far.
             loop {
                 if sp == 0 {
-                    return (best != usize::MAX).then(|| Hit {
+                    return (best_t < t_max).then(|| Hit {
                         t: best_t,
                         triangle: self.slot_ref[best],
                         bary: Vec3::new(1.0 - best_uv.0 - best_uv.1, best_uv.0, best_uv.1),
@@ -205,6 +210,18 @@ thread_local! {
 /// `u`/`v` are the weights of corners 1/2.
 #[inline(always)]
 pub(super) fn intersect4(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, Vec4, Vec4, u32) {
+    intersect4_in::<false>(p, r, t_min, t_max)
+}
+
+/// [`intersect4`] with `t_max` included (`t_min < t ≤ t_max`): closest-hit rays keep a
+/// triangle that ties with the closest hit so far, for the (t, slot) rule.
+#[inline(always)]
+pub(super) fn intersect4_upto(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, Vec4, Vec4, u32) {
+    intersect4_in::<true>(p, r, t_min, t_max)
+}
+
+#[inline(always)]
+fn intersect4_in<const UPTO: bool>(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, Vec4, Vec4, u32) {
     let [dx, dy, dz] = r.d;
     let [e1x, e1y, e1z] = p.e1;
     let [e2x, e2y, e2z] = p.e2;
@@ -225,7 +242,7 @@ pub(super) fn intersect4(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4,
     let v = (dx * qx + dy * qy + dz * qz) * inv_det;
     let t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
     // NaN lanes (degenerate or unused triangles) fail every comparison.
-    let hit =
-        u.cmpge(Vec4::ZERO) & v.cmpge(Vec4::ZERO) & (u + v).cmple(Vec4::ONE) & t.cmpgt(Vec4::splat(t_min)) & t.cmplt(Vec4::splat(t_max));
+    let below_max = if UPTO { t.cmple(Vec4::splat(t_max)) } else { t.cmplt(Vec4::splat(t_max)) };
+    let hit = u.cmpge(Vec4::ZERO) & v.cmpge(Vec4::ZERO) & (u + v).cmple(Vec4::ONE) & t.cmpgt(Vec4::splat(t_min)) & below_max;
     (t, u, v, hit.bitmask())
 }
