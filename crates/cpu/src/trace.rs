@@ -40,7 +40,7 @@ use hybrid_core::{GBuffer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
-use crate::bvh::{SceneBvh, ShadowCache};
+use crate::bvh::{PACKET, PacketRay, SceneBvh, ShadowCache};
 use crate::camera_rays::PrimaryRays;
 use crate::capsule::PointCloudCapsule;
 use hybrid_core::prepare::PreparedScene;
@@ -315,7 +315,9 @@ pub fn rt_only_gbuffer(prepared: &PreparedScene, bvh: &SceneBvh, camera: &Camera
 
 /// [`rt_only_gbuffer`] into an existing G-buffer (its size is the frame size): every pixel of
 /// every target is overwritten (uncovered pixels as [`GBuffer::new`] holds them), so a buffer can
-/// be reused frame after frame. Rows are traced and written in parallel bands.
+/// be reused frame after frame. Rows are traced and written in parallel bands, each in 4×4 pixel
+/// tiles traced as one ray packet ([`SceneBvh::closest_hits`]: the same hits as one ray at a
+/// time).
 pub fn rt_only_gbuffer_into(prepared: &PreparedScene, bvh: &SceneBvh, camera: &Camera, g: &mut GBuffer) {
     let (width, height) = (g.width, g.height);
     if width == 0 || height == 0 {
@@ -324,27 +326,41 @@ pub fn rt_only_gbuffer_into(prepared: &PreparedScene, bvh: &SceneBvh, camera: &C
     let rays = PrimaryRays::new(camera, width, height);
     let vp = camera.view_projection(width as f32 / height as f32);
     let band_len = width as usize * PRIMARY_BAND_ROWS;
+    let w = width as usize;
     g.bands_mut(band_len).into_par_iter().enumerate().with_max_len(1).for_each(|(band, mut rows)| {
-        for k in 0..rows.len() {
-            let i = band * band_len + k;
-            let (x, y) = ((i % width as usize) as u32, (i / width as usize) as u32);
-            let (origin, dir, t_max) = rays.ray(x, y);
-            let Some(hit) = bvh.closest_hit(origin, dir, 0.0, t_max) else {
-                rows.clear(k);
-                continue;
-            };
-            let point = origin + dir * hit.t;
-            let footprint = uv_footprint(prepared, hit.triangle, dir, rays.pixel_world_size(point));
-            let s = prepared.surface_at(hit.triangle, hit.bary, footprint);
-            let object = prepared.meshes[hit.triangle.mesh as usize].object;
-            let depth = vp.project_point3(s.position).z.clamp(0.0, 1.0);
-            rows.write(k, object, depth, &s);
-            rows.set_mask(k, 1.0);
+        // The band's rows in tiles of 4 × PRIMARY_BAND_ROWS pixels, each traced as one packet.
+        let band_rows = rows.len() / w;
+        let mut pixel = [0usize; PACKET];
+        let mut packet: [PacketRay; PACKET] = [(Vec3::ZERO, Vec3::ZERO, 0.0); PACKET];
+        for x0 in (0..w).step_by(PACKET / PRIMARY_BAND_ROWS) {
+            let mut n = 0;
+            for row in 0..band_rows {
+                for x in x0..(x0 + PACKET / PRIMARY_BAND_ROWS).min(w) {
+                    pixel[n] = row * w + x;
+                    packet[n] = rays.ray(x as u32, (band * PRIMARY_BAND_ROWS + row) as u32);
+                    n += 1;
+                }
+            }
+            let hits = bvh.closest_hits(&packet[..n], 0.0);
+            for ((&k, &(origin, dir, _)), hit) in pixel[..n].iter().zip(&packet[..n]).zip(hits) {
+                let Some(hit) = hit else {
+                    rows.clear(k);
+                    continue;
+                };
+                let point = origin + dir * hit.t;
+                let footprint = uv_footprint(prepared, hit.triangle, dir, rays.pixel_world_size(point));
+                let s = prepared.surface_at(hit.triangle, hit.bary, footprint);
+                let object = prepared.meshes[hit.triangle.mesh as usize].object;
+                let depth = vp.project_point3(s.position).z.clamp(0.0, 1.0);
+                rows.write(k, object, depth, &s);
+                rows.set_mask(k, 1.0);
+            }
         }
     });
 }
 
-/// Rows per parallel work item of [`rt_only_gbuffer_into`].
+/// Rows per parallel work item of [`rt_only_gbuffer_into`]: the height of its ray packets'
+/// tiles ([`PACKET`] / 4 = 4 rows of 4 pixels).
 const PRIMARY_BAND_ROWS: usize = 4;
 
 /// UV change per pixel on a triangle seen along `dir` with pixel size `world` at the hit:
