@@ -573,6 +573,23 @@ mod tests {
     }
 
     #[test]
+    fn the_index_lane_stays_out_of_the_builds_arithmetic() {
+        // The index's bits are a subnormal float (index 5 = 5 · 2⁻¹⁴⁹); what the build adds and
+        // multiplies must not carry it, or every operation stalls on Intel cores.
+        let p = Prim { lo: Vec4::new(1.0, 2.0, 3.0, f32::from_bits(5)), hi: Vec4::new(2.0, 3.0, 4.0, 0.0) };
+        assert_eq!(p.index(), 5);
+        assert!(p.lo.w.is_subnormal());
+        let b = p.bounds();
+        #[cfg(target_arch = "x86_64")]
+        for v in [p.centroid2(), b.min, b.max] {
+            // The SIMD register's fourth lane, which `Vec3A` hides.
+            let raw = Vec4::from(std::arch::x86_64::__m128::from(v));
+            assert!(!raw.w.is_subnormal(), "{v:?}: w = {:e}", raw.w);
+        }
+        assert_eq!(p.centroid2(), Vec3A::new(3.0, 5.0, 7.0));
+    }
+
+    #[test]
     fn one_axis_bin_equals_simd_bins() {
         let mut rng = StdRng::seed_from_u64(17);
         let special = [0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30, f32::MIN_POSITIVE];
