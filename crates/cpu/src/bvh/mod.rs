@@ -5,7 +5,10 @@
 //! collapsed into a 4-wide BVH whose four child boxes are tested at once with 4-lane SIMD (glam
 //! `Vec4`), as Embree's BVH4 does. Traversal is tuned for the two ray kinds of paper 1:
 //! - `closest_hit`: ordered traversal (hit children sorted by entry distance, nearest first);
-//!   stacked entries farther than the closest hit so far are skipped;
+//!   stacked entries farther than the closest hit so far are skipped; the hit is the least
+//!   `(t, pack slot)` pair, so it does not depend on the order leaves are visited in;
+//! - `closest_hits` (`packet.rs`): the same for up to 16 coherent rays at once (a 4×4 tile of
+//!   primary rays), each ray's hit bit for bit `closest_hit`'s;
 //! - `any_hit_attenuation` (listing 8b): unordered traversal that visits every triangle on the
 //!   segment once and stops as soon as the attenuation reaches 0. Which triangles matter to
 //!   shadow rays is precomputed per triangle: materials that cast no shadows (or are fully
