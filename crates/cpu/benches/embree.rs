@@ -37,9 +37,8 @@ use std::time::Instant;
 use glam::Vec3;
 use hybrid_core::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
-use hybrid_cpu::camera_rays::PrimaryRays;
 use rayon::prelude::*;
-use trace_scenes::{HEIGHT, WIDTH, load_average, rays, scenes, trace_closest_hits, trace_shadow_rays};
+use trace_scenes::{load_average, primary_tiles, rays, scenes, trace_closest_hits, trace_primary, trace_shadow_rays};
 
 // --- Embree 3.13 C API (rtcore.h), the parts used here ---------------------------------------
 
@@ -410,12 +409,7 @@ fn main() {
         // Primary rays of the scene's camera at WIDTH × HEIGHT, in 4×4 pixel tiles (the coherent
         // groups a packet tracer wants): ours one ray at a time, Embree 16-wide packets, one
         // per tile; 256 rays (16 tiles) per rayon chunk for both. Same answers first.
-        let cam = PrimaryRays::new(&prepared.scene.camera, WIDTH, HEIGHT);
-        let primary: Vec<(Vec3, Vec3, f32)> = (0..HEIGHT / 4)
-            .flat_map(|ty| (0..WIDTH / 4).map(move |tx| (tx, ty)))
-            .flat_map(|(tx, ty)| (0..16).map(move |k| (tx * 4 + k % 4, ty * 4 + k / 4)))
-            .map(|(x, y)| cam.ray(x, y))
-            .collect();
+        let primary = primary_tiles(&prepared);
         let ours_hits: Vec<Option<f32>> = primary.iter().map(|&(o, d, far)| bvh.closest_hit(o, d, 0.0, far).map(|h| h.t)).collect();
         let theirs_hits: Vec<Option<f32>> = primary.chunks(16).flat_map(|c| embree.closest_hits16(c)).collect();
         let differ = ours_hits
@@ -432,13 +426,7 @@ fn main() {
             theirs_hits.iter().flatten().count()
         );
         let ours = || {
-            std::hint::black_box(
-                primary
-                    .par_chunks(256)
-                    .with_max_len(1)
-                    .map(|c| c.iter().filter_map(|&(o, d, far)| bvh.closest_hit(o, d, 0.0, far)).map(|h| h.t).sum::<f32>())
-                    .sum::<f32>(),
-            );
+            std::hint::black_box(trace_primary(&bvh, &primary, false));
         };
         let theirs = || {
             std::hint::black_box(
@@ -457,13 +445,7 @@ fn main() {
         let same = packet_hits.iter().zip(&ours_hits).filter(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)).count();
         assert_eq!(same, primary.len(), "{name}: packets and single rays disagree");
         let ours = || {
-            std::hint::black_box(
-                primary
-                    .par_chunks(256)
-                    .with_max_len(1)
-                    .map(|c| c.chunks(16).map(|p| bvh.closest_hits(p, 0.0).iter().flatten().map(|h| h.t).sum::<f32>()).sum::<f32>())
-                    .sum::<f32>(),
-            );
+            std::hint::black_box(trace_primary(&bvh, &primary, true));
         };
         line(name, "primary, both 16-packets", primary.len(), "rays", race(passes, ours, theirs));
     }

@@ -16,7 +16,8 @@
 //! 2-thread rate next to the load average. Workloads: BVH build; shadow rays
 //! (`any_hit_attenuation`); reflection rays (`closest_hit` only, and with the secondary-hit
 //! shading of the trace stage: `surface_at` + `local_lighting`); the whole trace stage
-//! (`trace::trace`, one point light, every pixel masked).
+//! (`trace::trace`, one point light, every pixel masked); primary rays in 4×4 tiles one at a time
+//! and as 16-ray packets (`closest_hits`).
 
 mod trace_scenes;
 
@@ -31,7 +32,7 @@ use hybrid_cpu::bvh::SceneBvh;
 use hybrid_cpu::trace::{rt_only_gbuffer, trace};
 use hybrid_scene::{Lights, PointLight, Scene};
 use rayon::prelude::*;
-use trace_scenes::{HEIGHT, WIDTH, measure, rays, report, scenes, trace_closest_hits, trace_shadow_rays};
+use trace_scenes::{HEIGHT, WIDTH, measure, primary_tiles, rays, report, scenes, trace_closest_hits, trace_primary, trace_shadow_rays};
 
 fn bench_scene(c: &mut Criterion, name: &str, scene: &Scene, light: Vec3) {
     let prepared = PreparedScene::new(scene);
@@ -112,6 +113,20 @@ fn cpu_time_report() {
                 std::hint::black_box(shadow_cached());
             }),
         );
+        // Primary rays in 4×4 tiles: one at a time, and as 16-ray packets (the same hits).
+        let primary = primary_tiles(&prepared);
+        assert_eq!(trace_primary(&bvh, &primary, false).to_bits(), trace_primary(&bvh, &primary, true).to_bits(), "{name}: packets differ");
+        for (what, packets) in [("primary rays", false), ("primary rays, packets", true)] {
+            report(
+                name,
+                what,
+                primary.len(),
+                "rays",
+                measure(&one, || {
+                    std::hint::black_box(trace_primary(&bvh, &primary, packets));
+                }),
+            );
+        }
         let reflection = || trace_closest_hits(&bvh, &r.reflection);
         report(
             name,

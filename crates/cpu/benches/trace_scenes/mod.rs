@@ -9,6 +9,7 @@ use glam::{Vec2, Vec3};
 use hybrid_core::PreparedScene;
 use hybrid_core::shading::reflect;
 use hybrid_cpu::bvh::{SceneBvh, ShadowCache};
+use hybrid_cpu::camera_rays::PrimaryRays;
 use hybrid_cpu::trace::rt_only_gbuffer;
 use hybrid_scene::{Camera, Material, Mesh, Object, ObjectSource, Projection, Scene, Transform};
 use rayon::prelude::*;
@@ -155,6 +156,32 @@ pub fn rays(prepared: &PreparedScene, bvh: &SceneBvh, light: Vec3) -> Rays {
         diffuse.push((o, cosine_direction(n, hash2(i as u32))));
     }
     Rays { shadow, reflection, diffuse }
+}
+
+/// Primary rays `(origin, unit dir, t_max)` of the scene's camera at `WIDTH × HEIGHT`, in 4×4
+/// pixel tiles of 16 consecutive rays (the coherent groups a packet tracer wants).
+pub fn primary_tiles(prepared: &PreparedScene) -> Vec<(Vec3, Vec3, f32)> {
+    let cam = PrimaryRays::new(&prepared.scene.camera, WIDTH, HEIGHT);
+    (0..HEIGHT / 4)
+        .flat_map(|ty| (0..WIDTH / 4).map(move |tx| (tx, ty)))
+        .flat_map(|(tx, ty)| (0..16).map(move |k| (tx * 4 + k % 4, ty * 4 + k / 4)))
+        .map(|(x, y)| cam.ray(x, y))
+        .collect()
+}
+
+/// Closest hits of rays `(origin, dir, t_max)` in parallel chunks, one ray at a time
+/// (`packets` false) or in packets of 16 consecutive rays; returns the sum of the hit distances.
+pub fn trace_primary(bvh: &SceneBvh, rays: &[(Vec3, Vec3, f32)], packets: bool) -> f32 {
+    rays.par_chunks(CHUNK)
+        .with_max_len(1)
+        .map(|c| {
+            if packets {
+                c.chunks(16).map(|p| bvh.closest_hits(p, 0.0).iter().flatten().map(|h| h.t).sum::<f32>()).sum::<f32>()
+            } else {
+                c.iter().filter_map(|&(o, d, far)| bvh.closest_hit(o, d, 0.0, far)).map(|h| h.t).sum::<f32>()
+            }
+        })
+        .sum()
 }
 
 /// The benchmark scenes with their light positions.

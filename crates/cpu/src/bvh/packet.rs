@@ -225,30 +225,13 @@ fn slab16(lo: [f32; 3], hi: [f32; 3], p: &Packet, t_max: &Lanes, t_min: f32, nea
     lanes_le(near, &far)
 }
 
-/// Möller–Trumbore of triangle `lane` of a pack against every ray of `mask`, as `intersect4`
-/// does it for one ray (the same operations in the same order), keeping each ray's least
-/// `(t, slot)` hit.
+/// Möller–Trumbore of triangle `lane` of a pack against every ray of `mask` (`moller_trumbore`,
+/// as `intersect4` runs it for one ray), keeping each ray's least `(t, slot)` hit.
 #[inline(always)]
 fn tri16(pack: &Tri4, lane: usize, slot: u32, p: &Packet, best: &mut Best, mask: u32, t_min: f32) {
-    let [e1x, e1y, e1z] = pack.e1.map(|v| v[lane]);
-    let [e2x, e2y, e2z] = pack.e2.map(|v| v[lane]);
-    let v0 = pack.v0.map(|v| v[lane]);
+    let [e1, e2, v0] = [pack.e1, pack.e2, pack.v0].map(|c| c.map(|v| v[lane]));
     for i in 0..PACKET {
-        let [dx, dy, dz] = [p.d[0][i], p.d[1][i], p.d[2][i]];
-        let px = dy * e2z - dz * e2y;
-        let py = dz * e2x - dx * e2z;
-        let pz = dx * e2y - dy * e2x;
-        let det = e1x * px + e1y * py + e1z * pz;
-        let inv_det = 1.0 / det;
-        let sx = p.o[0][i] - v0[0];
-        let sy = p.o[1][i] - v0[1];
-        let sz = p.o[2][i] - v0[2];
-        let u = (sx * px + sy * py + sz * pz) * inv_det;
-        let qx = sy * e1z - sz * e1y;
-        let qy = sz * e1x - sx * e1z;
-        let qz = sx * e1y - sy * e1x;
-        let v = (dx * qx + dy * qy + dz * qz) * inv_det;
-        let t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
+        let (t, u, v) = moller_trumbore([0, 1, 2].map(|a| p.o[a][i]), [0, 1, 2].map(|a| p.d[a][i]), v0, e1, e2, 1.0);
         // `&`, not `&&`: every condition is evaluated, so the loop stays branch-free.
         let hit = (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > t_min) & (t <= best.t[i]) & (mask >> i & 1 != 0);
         let better = hit & ((t < best.t[i]) | (slot < best.slot[i]));

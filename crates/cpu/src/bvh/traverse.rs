@@ -206,6 +206,38 @@ thread_local! {
     static HIT_STACK: std::cell::RefCell<[u64; STACK_LEN]> = const { std::cell::RefCell::new([0; STACK_LEN]) };
 }
 
+/// Möller–Trumbore's arithmetic, once for every lane type: `(t, u, v)` of the ray `o + t·d`
+/// against the triangle `v0, v0 + e1, v0 + e2` (`u`, `v`: the weights of corners 1 and 2).
+/// `intersect4` runs it on four triangles (`Vec4` lanes, the ray splatted) and the packets on
+/// one triangle and one ray per `f32` lane: the same operations in the same order, so the same
+/// bits. Degenerate triangles give NaN or infinite lanes, which fail every hit test.
+#[inline(always)]
+pub(super) fn moller_trumbore<T>(o: [T; 3], d: [T; 3], v0: [T; 3], e1: [T; 3], e2: [T; 3], one: T) -> (T, T, T)
+where
+    T: Copy + std::ops::Add<Output = T> + std::ops::Sub<Output = T> + std::ops::Mul<Output = T> + std::ops::Div<Output = T>,
+{
+    let [dx, dy, dz] = d;
+    let [e1x, e1y, e1z] = e1;
+    let [e2x, e2y, e2z] = e2;
+    // p = d × e2
+    let px = dy * e2z - dz * e2y;
+    let py = dz * e2x - dx * e2z;
+    let pz = dx * e2y - dy * e2x;
+    let det = e1x * px + e1y * py + e1z * pz;
+    let inv_det = one / det;
+    let sx = o[0] - v0[0];
+    let sy = o[1] - v0[1];
+    let sz = o[2] - v0[2];
+    let u = (sx * px + sy * py + sz * pz) * inv_det;
+    // q = s × e1
+    let qx = sy * e1z - sz * e1y;
+    let qy = sz * e1x - sx * e1z;
+    let qz = sx * e1y - sy * e1x;
+    let v = (dx * qx + dy * qy + dz * qz) * inv_det;
+    let t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
+    (t, u, v)
+}
+
 /// Möller–Trumbore on four triangles: `(t, u, v, mask of lanes hit with t_min < t < t_max)`;
 /// `u`/`v` are the weights of corners 1/2.
 #[inline(always)]
@@ -222,25 +254,7 @@ pub(super) fn intersect4_upto(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (
 
 #[inline(always)]
 fn intersect4_in<const UPTO: bool>(p: &Tri4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, Vec4, Vec4, u32) {
-    let [dx, dy, dz] = r.d;
-    let [e1x, e1y, e1z] = p.e1;
-    let [e2x, e2y, e2z] = p.e2;
-    // p = d × e2
-    let px = dy * e2z - dz * e2y;
-    let py = dz * e2x - dx * e2z;
-    let pz = dx * e2y - dy * e2x;
-    let det = e1x * px + e1y * py + e1z * pz;
-    let inv_det = det.recip();
-    let sx = r.o[0] - p.v0[0];
-    let sy = r.o[1] - p.v0[1];
-    let sz = r.o[2] - p.v0[2];
-    let u = (sx * px + sy * py + sz * pz) * inv_det;
-    // q = s × e1
-    let qx = sy * e1z - sz * e1y;
-    let qy = sz * e1x - sx * e1z;
-    let qz = sx * e1y - sy * e1x;
-    let v = (dx * qx + dy * qy + dz * qz) * inv_det;
-    let t = (e2x * qx + e2y * qy + e2z * qz) * inv_det;
+    let (t, u, v) = moller_trumbore(r.o, r.d, p.v0, p.e1, p.e2, Vec4::ONE);
     // NaN lanes (degenerate or unused triangles) fail every comparison.
     let below_max = if UPTO { t.cmple(Vec4::splat(t_max)) } else { t.cmplt(Vec4::splat(t_max)) };
     let hit = u.cmpge(Vec4::ZERO) & v.cmpge(Vec4::ZERO) & (u + v).cmple(Vec4::ONE) & t.cmpgt(Vec4::splat(t_min)) & below_max;
