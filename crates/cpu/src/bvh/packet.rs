@@ -93,10 +93,13 @@ impl SceneBvh {
                 let oct = octant[todo.trailing_zeros() as usize & (PACKET - 1)];
                 let mask = (0..rays.len()).filter(|&i| octant[i] == oct).fold(0u32, |m, i| m | 1 << i) & todo;
                 todo &= !mask;
-                isa::dispatch(
-                    #[inline(always)]
-                    || self.packet_with(stack, &p, &mut best, mask, oct, t_min),
-                );
+                HIT_STACK.with(|single| match single.try_borrow_mut() {
+                    Ok(mut single) => isa::dispatch(
+                        #[inline(always)]
+                        || self.packet_with(stack, &mut single, &p, &mut best, mask, oct, t_min),
+                    ),
+                    Err(_) => self.packet_with(stack, &mut [0; STACK_LEN], &p, &mut best, mask, oct, t_min),
+                });
             }
         };
         PACKET_STACK.with(|cell| match cell.try_borrow_mut() {
@@ -115,15 +118,44 @@ impl SceneBvh {
     /// Traverses with the rays of `mask`, whose directions all lie in octant `oct` (bit `a` set:
     /// negative on axis `a`).
     #[inline(always)]
-    fn packet_with(&self, stack: &mut [Entry; STACK_LEN], p: &Packet, best: &mut Best, mask: u32, oct: u8, t_min: f32) {
+    #[allow(clippy::too_many_arguments)]
+    fn packet_with(
+        &self,
+        stack: &mut [Entry; STACK_LEN],
+        single: &mut [u64; STACK_LEN],
+        p: &Packet,
+        best: &mut Best,
+        mask: u32,
+        oct: u8,
+        t_min: f32,
+    ) {
         let neg = |a: usize| oct >> a & 1 != 0;
         let near_plane = [0, 1, 2].map(|a| if neg(a) { 3 + a } else { a });
         let far_plane = [0, 1, 2].map(|a| if neg(a) { a } else { 3 + a });
         const WRAP: usize = STACK_LEN - 1;
         let mut sp = 0usize;
         let (mut cur, mut cur_mask) = (0u32, mask);
+        // Rays that finished on their own.
+        let mut finished = 0u32;
         loop {
-            if cur & LEAF == 0 {
+            if cur_mask.count_ones() <= SINGLE_RAYS_BELOW {
+                // Too few rays here to fill the lanes: each finishes on its own, through this
+                // subtree and then the stacked ones it entered (their order does not change
+                // the least (t, slot) hit).
+                for i in lanes_of(cur_mask) {
+                    let r = RayPre::new(Vec3A::new(p.o[0][i], p.o[1][i], p.o[2][i]), Vec3A::new(p.d[0][i], p.d[1][i], p.d[2][i]));
+                    let mut closest = ClosestSoFar { t: best.t[i], slot: best.slot[i] as usize, uv: (best.u[i], best.v[i]) };
+                    self.closest_from(single, &r, t_min, cur, &mut closest);
+                    for j in (0..sp).rev() {
+                        let e = &stack[j & WRAP];
+                        if e.mask >> i & 1 != 0 && e.near[i] <= closest.t {
+                            self.closest_from(single, &r, t_min, e.node, &mut closest);
+                        }
+                    }
+                    (best.t[i], best.slot[i], best.u[i], best.v[i]) = (closest.t, closest.slot as u32, closest.uv.0, closest.uv.1);
+                }
+                finished |= cur_mask;
+            } else if cur & LEAF == 0 {
                 let n = &self.nodes[cur as usize];
                 let mut near = [[0.0; PACKET]; 4];
                 let mut hits = [0u32; 4];
@@ -175,7 +207,7 @@ impl SceneBvh {
                 }
                 sp -= 1;
                 let e = &stack[sp & WRAP];
-                let m = e.mask & lanes_le(&e.near, &best.t);
+                let m = e.mask & !finished & lanes_le(&e.near, &best.t);
                 if m != 0 {
                     (cur, cur_mask) = (e.node, m);
                     break;
@@ -183,6 +215,22 @@ impl SceneBvh {
             }
         }
     }
+}
+
+/// A packet's rays go on one at a time where at most this many of them enter a node: below
+/// that, testing sixteen lanes per box costs more than the rays' own traversals.
+const SINGLE_RAYS_BELOW: u32 = 2;
+
+/// The lanes set in `mask`, lowest first.
+#[inline(always)]
+fn lanes_of(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            i
+        })
+    })
 }
 
 /// `_mm_max_ps`'s rule (the second operand when either is NaN), as `Vec4::max` in `node_hits`.

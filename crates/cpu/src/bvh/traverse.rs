@@ -26,18 +26,31 @@ impl SceneBvh {
         // packet, which visits them in another order, finds the same one): a triangle at the
         // closest distance so far still wins if its slot is lower. Slot 0 to start with means
         // that nothing ties with `t_max` itself, so a hit was found iff `best_t < t_max`.
-        let mut best_t = t_max;
-        let mut best = 0usize;
-        let mut best_uv = (0.0f32, 0.0f32);
+        let mut best = ClosestSoFar { t: t_max, slot: 0, uv: (0.0, 0.0) };
+        self.closest_from(stack, &r, t_min, 0, &mut best);
+        (best.t < t_max).then(|| Hit {
+            t: best.t,
+            triangle: self.slot_ref[best.slot],
+            bary: Vec3::new(1.0 - best.uv.0 - best.uv.1, best.uv.0, best.uv.1),
+        })
+    }
+
+    /// The closest-hit traversal of the subtree of `start` (a node index or a leaf reference),
+    /// improving on `closest`.
+    #[inline(always)]
+    pub(super) fn closest_from(&self, stack: &mut [u64; STACK_LEN], r: &RayPre, t_min: f32, start: u32, closest: &mut ClosestSoFar) {
+        let mut best_t = closest.t;
+        let mut best = closest.slot;
+        let mut best_uv = closest.uv;
         // Entries still to visit are `stack[..sp]`, indexed modulo the power-of-two length (no
         // bounds check; it cannot fill, see `STACK_LEN`).
         const WRAP: usize = STACK_LEN - 1;
         let mut sp = 0usize;
-        let mut cur = 0u32;
+        let mut cur = start;
         loop {
             if cur & LEAF == 0 {
                 let n = &self.nodes[cur as usize];
-                let (near, mask) = node_hits(n, &r, t_min, best_t);
+                let (near, mask) = node_hits(n, r, t_min, best_t);
                 if mask != 0 {
                     if mask & (mask - 1) == 0 {
                         cur = n.child[mask.trailing_zeros() as usize & 3];
@@ -76,7 +89,7 @@ impl SceneBvh {
                 let range = leaf_packs(cur);
                 let first = range.start;
                 for (pi, pack) in self.packs[range].iter().enumerate() {
-                    let (t, u, v, mut mask) = intersect4_upto(pack, &r, t_min, best_t);
+                    let (t, u, v, mut mask) = intersect4_upto(pack, r, t_min, best_t);
                     if mask != 0 {
                         let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
                         while mask != 0 {
@@ -95,11 +108,8 @@ impl SceneBvh {
             // Pop the next entry that starts before the closest hit so far.
             loop {
                 if sp == 0 {
-                    return (best_t < t_max).then(|| Hit {
-                        t: best_t,
-                        triangle: self.slot_ref[best],
-                        bary: Vec3::new(1.0 - best_uv.0 - best_uv.1, best_uv.0, best_uv.1),
-                    });
+                    *closest = ClosestSoFar { t: best_t, slot: best, uv: best_uv };
+                    return;
                 }
                 sp -= 1;
                 let key = stack[sp & WRAP];
@@ -195,6 +205,14 @@ impl SceneBvh {
     }
 }
 
+/// A ray's closest hit so far: distance, pack slot, and the weights of corners 1 and 2.
+#[derive(Clone, Copy)]
+pub(super) struct ClosestSoFar {
+    pub(super) t: f32,
+    pub(super) slot: usize,
+    pub(super) uv: (f32, f32),
+}
+
 /// Length of the traversal stacks (a power of two). A 4-wide node stacks at most three
 /// children, and a path is at most `MAX_DEPTH` (56) nodes deep plus the ≤ 8 levels
 /// `Packer::leaf` adds above an oversized leaf, so at most 192 entries are ever stacked.
@@ -203,7 +221,7 @@ pub(super) const STACK_LEN: usize = 256;
 thread_local! {
     /// Per-thread closest-hit traversal stack, reused from ray to ray (its 64-bit entries
     /// would make a large array to zero for every ray).
-    static HIT_STACK: std::cell::RefCell<[u64; STACK_LEN]> = const { std::cell::RefCell::new([0; STACK_LEN]) };
+    pub(super) static HIT_STACK: std::cell::RefCell<[u64; STACK_LEN]> = const { std::cell::RefCell::new([0; STACK_LEN]) };
 }
 
 /// Möller–Trumbore's arithmetic, once for every lane type: `(t, u, v)` of the ray `o + t·d`
