@@ -6,7 +6,9 @@
 //! four SSE2 ones, as `isa::dispatch` compiles it), and a child is entered with the rays that hit
 //! it. A leaf's triangles are tested one at a time against all of those rays. What a packet
 //! saves over sixteen single rays is the per-ray work around the arithmetic: node fetches, stack
-//! traffic, the sorting of children and the branches, which coherent rays share.
+//! traffic, the sorting of children and the branches, which coherent rays share. Where a packet
+//! has thinned out (at most [`SINGLE_RAYS_BELOW`] rays enter a node), those rays leave it and
+//! finish with the single-ray traversal, from that node and the stacked ones they entered.
 //!
 //! Every ray's answer is bit for bit [`SceneBvh::closest_hit`]'s: each ray–box and
 //! ray–triangle test does the single-ray kernel's operations in the same order (lane by lane
