@@ -352,31 +352,25 @@ pub(super) fn bin_prims(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> B
 
 #[inline(always)]
 fn bin_prims_with(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
-    let mut bins = Bins::EMPTY;
-    if prims.len() < BIN_TWO_WAY_MIN {
-        prims.iter().for_each(|p| bins.add(p, lo, scale, nb));
-        return bins;
+    match prims.len() {
+        n if n < BIN_TWO_WAY_MIN => bin_interleaved::<1>(prims, lo, scale, nb),
+        n if n < BIN_FOUR_WAY_MIN => bin_interleaved::<2>(prims, lo, scale, nb),
+        _ => bin_interleaved::<4>(prims, lo, scale, nb),
     }
-    if prims.len() < BIN_FOUR_WAY_MIN {
-        let mut odd = Bins::EMPTY;
-        let mut pairs = prims.chunks_exact(2);
-        for pair in &mut pairs {
-            bins.add(&pair[0], lo, scale, nb);
-            odd.add(&pair[1], lo, scale, nb);
+}
+
+/// Binning with consecutive primitives dealt round `N` sets of bins, merged in order at the end.
+#[inline(always)]
+fn bin_interleaved<const N: usize>(prims: &[Prim], lo: Vec3A, scale: Vec3A, nb: usize) -> Bins {
+    let mut sets = [Bins::EMPTY; N];
+    let mut groups = prims.chunks_exact(N);
+    for group in &mut groups {
+        for (bins, p) in sets.iter_mut().zip(group) {
+            bins.add(p, lo, scale, nb);
         }
-        pairs.remainder().iter().for_each(|p| bins.add(p, lo, scale, nb));
-        return bins.merge(odd);
     }
-    let (mut b1, mut b2, mut b3) = (Bins::EMPTY, Bins::EMPTY, Bins::EMPTY);
-    let mut quads = prims.chunks_exact(4);
-    for q in &mut quads {
-        bins.add(&q[0], lo, scale, nb);
-        b1.add(&q[1], lo, scale, nb);
-        b2.add(&q[2], lo, scale, nb);
-        b3.add(&q[3], lo, scale, nb);
-    }
-    quads.remainder().iter().for_each(|p| bins.add(p, lo, scale, nb));
-    bins.merge(b1).merge(b2).merge(b3)
+    groups.remainder().iter().for_each(|p| sets[0].add(p, lo, scale, nb));
+    sets.into_iter().reduce(Bins::merge).unwrap_or(Bins::EMPTY)
 }
 
 /// Binned SAH with `nb ≤ BINS` bins over all three axes at once (one pass over the primitives,
