@@ -328,14 +328,15 @@ pub fn rt_only_gbuffer_into(prepared: &PreparedScene, bvh: &SceneBvh, camera: &C
     let band_len = width as usize * PRIMARY_BAND_ROWS;
     let w = width as usize;
     g.bands_mut(band_len).into_par_iter().enumerate().with_max_len(1).for_each(|(band, mut rows)| {
-        // The band's rows in tiles of 4 × PRIMARY_BAND_ROWS pixels, each traced as one packet.
+        // The band's rows in tiles of TILE_WIDTH × PRIMARY_BAND_ROWS pixels, each traced as one
+        // packet.
         let band_rows = rows.len() / w;
         let mut pixel = [0usize; PACKET];
         let mut packet: [PacketRay; PACKET] = [(Vec3::ZERO, Vec3::ZERO, 0.0); PACKET];
-        for x0 in (0..w).step_by(PACKET / PRIMARY_BAND_ROWS) {
+        for x0 in (0..w).step_by(TILE_WIDTH) {
             let mut n = 0;
             for row in 0..band_rows {
-                for x in x0..(x0 + PACKET / PRIMARY_BAND_ROWS).min(w) {
+                for x in x0..(x0 + TILE_WIDTH).min(w) {
                     pixel[n] = row * w + x;
                     packet[n] = rays.ray(x as u32, (band * PRIMARY_BAND_ROWS + row) as u32);
                     n += 1;
@@ -362,6 +363,8 @@ pub fn rt_only_gbuffer_into(prepared: &PreparedScene, bvh: &SceneBvh, camera: &C
 /// Rows per parallel work item of [`rt_only_gbuffer_into`]: the height of its ray packets'
 /// tiles ([`PACKET`] / 4 = 4 rows of 4 pixels).
 const PRIMARY_BAND_ROWS: usize = 4;
+/// Width of those tiles, so that a tile fills a packet.
+const TILE_WIDTH: usize = PACKET / PRIMARY_BAND_ROWS;
 
 /// UV change per pixel on a triangle seen along `dir` with pixel size `world` at the hit:
 /// the pixel's footprint (stretched by the viewing angle, as the raster's larger screen
