@@ -103,29 +103,15 @@ impl RayPre {
     #[inline(always)]
     fn new(o: Vec3A, d: Vec3A) -> Self {
         let inv = d.recip();
-        let (near, far) = slab_planes(octant(inv));
+        let neg = [inv.x < 0.0, inv.y < 0.0, inv.z < 0.0];
         Self {
             o: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             d: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
-            near,
-            far,
+            near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+            far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
         }
     }
-}
-
-/// The octant of a ray by its inverse direction: bit `a` set where it is negative on axis `a`.
-#[inline(always)]
-fn octant(inv: Vec3A) -> u8 {
-    u8::from(inv.x < 0.0) | u8::from(inv.y < 0.0) << 1 | u8::from(inv.z < 0.0) << 2
-}
-
-/// The indices in `Node4::planes` of the planes a ray of octant `oct` enters and leaves a box
-/// through, per axis: `(near, far)`.
-#[inline(always)]
-fn slab_planes(oct: u8) -> ([usize; 3], [usize; 3]) {
-    let neg = |a: usize| oct >> a & 1 != 0;
-    ([0, 1, 2].map(|a| if neg(a) { 3 + a } else { a }), [0, 1, 2].map(|a| if neg(a) { a } else { 3 + a }))
 }
 
 /// Slab test of the four children: entry distances and the bit mask of children hit within

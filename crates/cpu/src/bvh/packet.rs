@@ -87,7 +87,7 @@ impl SceneBvh {
                 p.inv[axis][i] = inv[axis];
             }
             best.t[i] = t_max;
-            octant[i] = super::octant(inv);
+            octant[i] = u8::from(inv.x < 0.0) | u8::from(inv.y < 0.0) << 1 | u8::from(inv.z < 0.0) << 2;
         }
         let mut todo = (1u32 << rays.len()) - 1;
         let mut trace = |stack: &mut [Entry; STACK_LEN]| {
@@ -131,7 +131,9 @@ impl SceneBvh {
         oct: u8,
         t_min: f32,
     ) {
-        let (near_plane, far_plane) = slab_planes(oct);
+        let neg = |a: usize| oct >> a & 1 != 0;
+        let near_plane = [0, 1, 2].map(|a| if neg(a) { 3 + a } else { a });
+        let far_plane = [0, 1, 2].map(|a| if neg(a) { a } else { 3 + a });
         const WRAP: usize = STACK_LEN - 1;
         let mut sp = 0usize;
         let (mut cur, mut cur_mask) = (0u32, mask);
