@@ -38,7 +38,7 @@ use glam::Vec3;
 use hybrid_core::PreparedScene;
 use hybrid_cpu::bvh::SceneBvh;
 use rayon::prelude::*;
-use trace_scenes::{load_average, primary_tiles, rays, scenes, trace_closest_hits, trace_primary, trace_shadow_rays};
+use trace_scenes::{load_average, primary_hits, primary_tiles, rays, scenes, trace_closest_hits, trace_primary, trace_shadow_rays};
 
 // --- Embree 3.13 C API (rtcore.h), the parts used here ---------------------------------------
 
@@ -410,7 +410,7 @@ fn main() {
         // groups a packet tracer wants): ours one ray at a time, Embree 16-wide packets, one
         // per tile; 256 rays (16 tiles) per rayon chunk for both. Same answers first.
         let primary = primary_tiles(&prepared);
-        let ours_hits: Vec<Option<f32>> = primary.iter().map(|&(o, d, far)| bvh.closest_hit(o, d, 0.0, far).map(|h| h.t)).collect();
+        let ours_hits = primary_hits(&bvh, &primary, false);
         let theirs_hits: Vec<Option<f32>> = primary.chunks(16).flat_map(|c| embree.closest_hits16(c)).collect();
         let differ = ours_hits
             .iter()
@@ -441,9 +441,8 @@ fn main() {
 
         // Ours in packets too: one `closest_hits` per tile, every answer bit for bit the
         // single ray's.
-        let packet_hits: Vec<Option<f32>> = primary.chunks(16).flat_map(|c| bvh.closest_hits(c, 0.0)).map(|h| h.map(|h| h.t)).collect();
-        let same = packet_hits.iter().zip(&ours_hits).filter(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)).count();
-        assert_eq!(same, primary.len(), "{name}: packets and single rays disagree");
+        let bits = |hits: Vec<Option<f32>>| hits.into_iter().map(|t| t.map(f32::to_bits)).collect::<Vec<_>>();
+        assert_eq!(bits(primary_hits(&bvh, &primary, true)), bits(ours_hits), "{name}: packets and single rays disagree");
         let ours = || {
             std::hint::black_box(trace_primary(&bvh, &primary, true));
         };

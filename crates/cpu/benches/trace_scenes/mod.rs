@@ -169,6 +169,16 @@ pub fn primary_tiles(prepared: &PreparedScene) -> Vec<(Vec3, Vec3, f32)> {
         .collect()
 }
 
+/// The closest-hit distance of each ray `(origin, dir, t_max)`, in order, one ray at a time
+/// (`packets` false) or in packets of 16 consecutive rays: the two must be equal bit for bit.
+pub fn primary_hits(bvh: &SceneBvh, rays: &[(Vec3, Vec3, f32)], packets: bool) -> Vec<Option<f32>> {
+    if packets {
+        rays.chunks(16).flat_map(|c| bvh.closest_hits(c, 0.0).into_iter().take(c.len())).map(|h| h.map(|h| h.t)).collect()
+    } else {
+        rays.iter().map(|&(o, d, far)| bvh.closest_hit(o, d, 0.0, far).map(|h| h.t)).collect()
+    }
+}
+
 /// Closest hits of rays `(origin, dir, t_max)` in parallel chunks, one ray at a time
 /// (`packets` false) or in packets of 16 consecutive rays; returns the sum of the hit distances.
 pub fn trace_primary(bvh: &SceneBvh, rays: &[(Vec3, Vec3, f32)], packets: bool) -> f32 {
