@@ -40,6 +40,10 @@ pub struct PreparedScene<'s> {
     pub object_bounds: Vec<Aabb>,
     /// Every triangle of every mesh, in mesh order (the trace stage's primitive list).
     pub triangles: Vec<TriangleRef>,
+    /// Per material (index as `scene.materials`): its shadow-ray transparency class
+    /// ([`material_shadow`]), found once here because it can scan whole textures, and the CPU
+    /// BVH, the GPU's BVHs and the shadow-map casters all read it.
+    pub material_shadow: Vec<f32>,
 }
 
 impl<'s> PreparedScene<'s> {
@@ -74,7 +78,15 @@ impl<'s> PreparedScene<'s> {
             .enumerate()
             .flat_map(|(mi, m)| (0..m.indices.len() as u32).map(move |t| TriangleRef { mesh: mi as u32, triangle: t }))
             .collect();
-        Self { scene, meshes, object_bounds, triangles }
+        let material_shadow = scene.materials.iter().map(|m| material_shadow(m, &scene.textures)).collect();
+        Self { scene, meshes, object_bounds, triangles, material_shadow }
+    }
+
+    /// The shadow-ray transparency class of mesh `mesh`'s material ([`material_shadow`]; 1, casts
+    /// no shadow, for a material index out of range).
+    #[inline]
+    pub fn mesh_shadow(&self, mesh: usize) -> f32 {
+        self.material_shadow.get(self.meshes[mesh].material).copied().unwrap_or(1.0)
     }
 
     /// The three world-space corners of a triangle.

@@ -24,7 +24,6 @@ use std::time::Instant;
 
 use hybrid_core::PreparedScene;
 
-use crate::bvh::material_shadow;
 use crate::context::{GpuContext, GpuError, ray_query_missing};
 use crate::scene::SceneGpu;
 use crate::spheres::SpheresGpu;
@@ -156,7 +155,6 @@ impl RtScene {
         let index_buffer = blas_input("rt.indices", bytemuck::cast_slice(if indices.is_empty() { &[0u32; 3][..] } else { &indices }));
 
         // Per mesh: its triangles' range and its shadow class.
-        let shadow: Vec<f32> = prepared.scene.materials.iter().map(|m| material_shadow(m, &prepared.scene.textures)).collect();
         let mesh_count = prepared.meshes.len();
         if mesh_count >= 1 << 24 {
             return Err(too_large(format!("{mesh_count} meshes: an instance's custom index holds 24 bits")));
@@ -169,7 +167,7 @@ impl RtScene {
             }
             r.1 += 1;
         }
-        let mesh_shadow: Vec<f32> = prepared.meshes.iter().map(|m| shadow.get(m.material).copied().unwrap_or(1.0)).collect();
+        let mesh_shadow: Vec<f32> = (0..mesh_count).map(|m| prepared.mesh_shadow(m)).collect();
 
         let flags = wgpu::AccelerationStructureGeometryFlags::NO_DUPLICATE_ANY_HIT_INVOCATION;
         let blas_desc = |label| wgpu::CreateBlasDescriptor {

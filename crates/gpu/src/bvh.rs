@@ -76,8 +76,7 @@ impl FlatBvh {
     pub fn build(triangles: &[GpuTriangle], vertices: &[GpuVertex], prepared: &PreparedScene) -> FlatBvh {
         let corners: Vec<[Vec3A; 3]> =
             triangles.iter().map(|t| t.v.map(|i| Vec3A::from_slice(&vertices[i as usize].position[..3]))).collect();
-        let shadow: Vec<f32> = prepared.scene.materials.iter().map(|m| material_shadow(m, &prepared.scene.textures)).collect();
-        let mesh_shadow: Vec<f32> = prepared.meshes.iter().map(|m| shadow.get(m.material).copied().unwrap_or(1.0)).collect();
+        let mesh_shadow: Vec<f32> = (0..prepared.meshes.len()).map(|m| prepared.mesh_shadow(m)).collect();
         if corners.is_empty() {
             // One leaf over one degenerate triangle (never hit, ignored by shadow rays).
             let node = GpuBvhNode { min: [0.0, 0.0, 0.0, f32::from_bits(0)], max: [0.0, 0.0, 0.0, f32::from_bits(1)] };

@@ -96,6 +96,18 @@ pub(super) struct Prim {
 }
 
 impl Prim {
+    /// Triangle `index` with corners `corners`. Non-finite corners make a point box: such
+    /// triangles can never be hit anyway.
+    #[inline(always)]
+    pub(super) fn of_triangle(index: u32, corners: [Vec3; 3]) -> Prim {
+        let [a, b, d] = corners.map(Vec3A::from);
+        let idx = f32::from_bits(index);
+        if !(a.is_finite() && b.is_finite() && d.is_finite()) {
+            return Prim { lo: Vec4::ZERO.with_w(idx), hi: Vec4::ZERO };
+        }
+        Prim { lo: a.min(b).min(d).extend(idx), hi: a.max(b).max(d).extend(0.0) }
+    }
+
     #[inline(always)]
     pub(super) fn bounds(&self) -> Bounds {
         Bounds { min: Vec3A::from_vec4(self.lo.with_w(0.0)), max: Vec3A::from_vec4(self.hi) }
@@ -116,9 +128,8 @@ impl Prim {
 /// Lays out leaf packs in depth-first leaf order during the collapse (the packs themselves are
 /// filled afterwards, in parallel, from these descriptors).
 pub(super) struct Packer<'a> {
-    pub(super) corners: &'a [[Vec3; 3]],
-    /// Triangle index of each primitive position after the build's partitioning.
-    pub(super) order: &'a [u32],
+    /// The primitives in their order after the build's partitioning.
+    pub(super) prims: &'a [Prim],
     /// Per pack: first position in `order` and number of triangles (1–4).
     pub(super) packs: Vec<(u32, u32)>,
     pub(super) leaves: usize,
@@ -146,9 +157,7 @@ impl Packer<'_> {
         for (k, s) in (first..first + count).step_by(part as usize).enumerate() {
             let c = part.min(first + count - s);
             let mut b = Bounds::EMPTY;
-            for &tri in &self.order[s as usize..(s + c) as usize] {
-                self.corners[tri as usize].iter().for_each(|p| b.grow_point(Vec3A::from(*p)));
-            }
+            self.prims[s as usize..(s + c) as usize].iter().for_each(|p| b.grow(&p.bounds()));
             let r = self.leaf(s, c, nodes);
             node.set(k, &b, r);
         }
@@ -160,36 +169,20 @@ impl Packer<'_> {
 impl SceneBvh {
     /// Builds the BVH over `prepared.triangles`.
     pub fn build(prepared: &PreparedScene) -> SceneBvh {
-        let corners: Vec<[Vec3; 3]> = prepared.triangles.par_iter().map(|t| prepared.triangle(*t)).collect();
-        let mut prims: Vec<Prim> = corners
-            .par_iter()
-            .enumerate()
-            .map(|(i, c)| {
-                let [a, b, d] = c.map(Vec3A::from);
-                let idx = f32::from_bits(i as u32);
-                // Non-finite corners make a point box: such triangles can never be hit anyway.
-                if !(a.is_finite() && b.is_finite() && d.is_finite()) {
-                    return Prim { lo: Vec4::ZERO.with_w(idx), hi: Vec4::ZERO };
-                }
-                Prim { lo: a.min(b).min(d).extend(idx), hi: a.max(b).max(d).extend(0.0) }
-            })
-            .collect();
+        // The corners are read from the prepared meshes twice (here and for the packs) rather
+        // than gathered into an array of their own: a fresh array costs a page fault per 4 KiB
+        // written (about 2 µs each on a VM), about as much as the gather itself.
+        let mut prims: Vec<Prim> =
+            prepared.triangles.par_iter().enumerate().map(|(i, t)| Prim::of_triangle(i as u32, prepared.triangle(*t))).collect();
 
-        let scene = prepared.scene;
-        let (root, material_shadow) = rayon::join(
-            || {
-                (!prims.is_empty()).then(|| {
-                    let pb = PrimBounds::of(&prims);
-                    build_rec(&mut prims, pb, 0, 0)
-                })
-            },
-            || scene.materials.par_iter().map(|m| material_shadow(m, &scene.textures)).collect::<Vec<f32>>(),
-        );
+        let root = (!prims.is_empty()).then(|| {
+            let pb = PrimBounds::of(&prims);
+            build_rec(&mut prims, pb, 0, 0)
+        });
 
         let order: Vec<u32> = prims.iter().map(Prim::index).collect();
-        drop(prims);
         let mut nodes = Vec::with_capacity(order.len() / 8);
-        let mut packer = Packer { corners: &corners, order: &order, packs: Vec::with_capacity(order.len() / 3), leaves: 0 };
+        let mut packer = Packer { prims: &prims, packs: Vec::with_capacity(order.len() / 3), leaves: 0 };
         match &root {
             None => {}
             Some(BuildNode::Leaf { bounds, first, count }) => {
@@ -203,35 +196,42 @@ impl SceneBvh {
             }
         }
         drop(root);
-
         let Packer { packs: descs, leaves, .. } = packer;
-        // Per pack, in one parallel pass: the triangle data, and per lane the triangle and its
-        // shadow transparency.
-        let (packs, lanes): (Vec<Tri4>, Vec<[(TriangleRef, f32); 4]>) = descs
-            .par_iter()
-            .map(|&(first, n)| {
+        drop(prims);
+
+        // Per pack lane (slot), in parallel passes that each write their array once: the
+        // triangle (`NO_TRI` in unused lanes) and its shadow transparency; then per pack the
+        // triangle data and the shadow bits.
+        let slot_ref: Vec<TriangleRef> = (0..descs.len() * 4)
+            .into_par_iter()
+            .map(|slot| {
+                let (first, n) = descs[slot / 4];
+                let lane = (slot % 4) as u32;
+                if lane < n { prepared.triangles[order[(first + lane) as usize] as usize] } else { NO_TRI }
+            })
+            .collect();
+        let slot_shadow: Vec<f32> =
+            slot_ref.par_iter().map(|t| if *t == NO_TRI { 1.0 } else { prepared.mesh_shadow(t.mesh as usize) }).collect();
+        let packs: Vec<Tri4> = slot_ref
+            .par_chunks_exact(4)
+            .map(|refs| {
                 let mut p = Tri4::EMPTY;
-                let mut lanes = [(NO_TRI, 1.0f32); 4];
-                for (lane, &tri) in order[first as usize..(first + n) as usize].iter().enumerate() {
-                    let [a, b, c] = corners[tri as usize];
+                for (lane, &t) in refs.iter().enumerate().filter(|(_, t)| **t != NO_TRI) {
+                    let [a, b, c] = prepared.triangle(t);
                     let (e1, e2) = (b - a, c - a);
                     for axis in 0..3 {
                         p.v0[axis][lane] = a[axis];
                         p.e1[axis][lane] = e1[axis];
                         p.e2[axis][lane] = e2[axis];
                     }
-                    let t = prepared.triangles[tri as usize];
-                    lanes[lane] = (t, material_shadow.get(prepared.meshes[t.mesh as usize].material).copied().unwrap_or(1.0));
                 }
-                (p, lanes)
+                p
             })
-            .unzip();
-        let slot_ref: Vec<TriangleRef> = lanes.iter().flat_map(|l| l.map(|(t, _)| t)).collect();
-        let slot_shadow: Vec<f32> = lanes.iter().flat_map(|l| l.map(|(_, s)| s)).collect();
+            .collect();
         // Bits 0–3: lanes that can block light; bits 4–7: lanes that block it fully.
-        let pack_shadow: Vec<u8> = lanes
-            .iter()
-            .map(|l| (0..4).fold(0u8, |bits, k| bits | u8::from(l[k].1 != 1.0) << k | u8::from(l[k].1 == 0.0) << (k + 4)))
+        let pack_shadow: Vec<u8> = slot_shadow
+            .par_chunks_exact(4)
+            .map(|l| (0..4).fold(0u8, |bits, k| bits | u8::from(l[k] != 1.0) << k | u8::from(l[k] == 0.0) << (k + 4)))
             .collect();
         SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles: order.len(), leaves }
     }

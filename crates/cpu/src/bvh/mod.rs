@@ -29,7 +29,7 @@
 use glam::{Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
 
-use hybrid_core::prepare::{PreparedScene, SHADOW_EVALUATE, TriangleRef, material_shadow};
+use hybrid_core::prepare::{PreparedScene, SHADOW_EVALUATE, TriangleRef};
 
 /// A ray–triangle hit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -545,8 +545,9 @@ mod tests {
         let scene = soup_scene(150, 4, vec![Material::default()]);
         let p = PreparedScene::new(&scene);
         let corners: Vec<[Vec3; 3]> = p.triangles.iter().map(|t| p.triangle(*t)).collect();
+        let prims: Vec<Prim> = corners.iter().enumerate().map(|(i, c)| Prim::of_triangle(i as u32, *c)).collect();
         let order: Vec<u32> = (0..150).collect();
-        let mut packer = Packer { corners: &corners, order: &order, packs: Vec::new(), leaves: 0 };
+        let mut packer = Packer { prims: &prims, packs: Vec::new(), leaves: 0 };
         let mut nodes = Vec::new();
         // 150 triangles = 38 packs: one extra node over four leaves of ≤ 16 packs.
         let r = packer.leaf(0, 150, &mut nodes);
