@@ -164,7 +164,7 @@ pub const CASTER_MAX_TRANSMITTANCE: f32 = 0.5;
 /// Per mesh of `prepared`: whether it casts into the shadow maps (its material's shadow
 /// transmittance is below [`CASTER_MAX_TRANSMITTANCE`]; textured opacity counts as opaque).
 pub fn caster_meshes(prepared: &PreparedScene) -> Vec<bool> {
-    prepared.meshes.iter().map(|m| prepared.material_shadow.get(m.material).is_some_and(|&s| s < CASTER_MAX_TRANSMITTANCE)).collect()
+    (0..prepared.meshes.len()).map(|m| prepared.mesh_shadow(m) < CASTER_MAX_TRANSMITTANCE).collect()
 }
 
 /// The polygons' world bounds (every object with geometry) and, when given, the point clouds'.

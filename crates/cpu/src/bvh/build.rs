@@ -130,13 +130,13 @@ impl Prim {
 pub(super) struct Packer<'a> {
     /// The primitives in their order after the build's partitioning.
     pub(super) prims: &'a [Prim],
-    /// Per pack: first position in `order` and number of triangles (1–4).
+    /// Per pack: first position in `prims` and number of triangles (1–4).
     pub(super) packs: Vec<(u32, u32)>,
     pub(super) leaves: usize,
 }
 
 impl Packer<'_> {
-    /// Packs the triangles `first..first + count` (positions in `order`); returns the reference
+    /// Packs the triangles `first..first + count` (positions in `prims`); returns the reference
     /// to them: a leaf, or an extra node over up to four leaves when they need more than
     /// [`MAX_LEAF_PACKS`] packs.
     pub(super) fn leaf(&mut self, first: u32, count: u32, nodes: &mut Vec<Node4>) -> u32 {
@@ -180,9 +180,8 @@ impl SceneBvh {
             build_rec(&mut prims, pb, 0, 0)
         });
 
-        let order: Vec<u32> = prims.iter().map(Prim::index).collect();
-        let mut nodes = Vec::with_capacity(order.len() / 8);
-        let mut packer = Packer { prims: &prims, packs: Vec::with_capacity(order.len() / 3), leaves: 0 };
+        let mut nodes = Vec::with_capacity(prims.len() / 8);
+        let mut packer = Packer { prims: &prims, packs: Vec::with_capacity(prims.len() / 3), leaves: 0 };
         match &root {
             None => {}
             Some(BuildNode::Leaf { bounds, first, count }) => {
@@ -197,7 +196,6 @@ impl SceneBvh {
         }
         drop(root);
         let Packer { packs: descs, leaves, .. } = packer;
-        drop(prims);
 
         // Per pack lane (slot), in parallel passes that each write their array once: the
         // triangle (`NO_TRI` in unused lanes) and its shadow transparency; then per pack the
@@ -207,9 +205,11 @@ impl SceneBvh {
             .map(|slot| {
                 let (first, n) = descs[slot / 4];
                 let lane = (slot % 4) as u32;
-                if lane < n { prepared.triangles[order[(first + lane) as usize] as usize] } else { NO_TRI }
+                if lane < n { prepared.triangles[prims[(first + lane) as usize].index() as usize] } else { NO_TRI }
             })
             .collect();
+        let triangles = prims.len();
+        drop(prims);
         let slot_shadow: Vec<f32> =
             slot_ref.par_iter().map(|t| if *t == NO_TRI { 1.0 } else { prepared.mesh_shadow(t.mesh as usize) }).collect();
         let packs: Vec<Tri4> = slot_ref
@@ -233,7 +233,7 @@ impl SceneBvh {
             .par_chunks_exact(4)
             .map(|l| (0..4).fold(0u8, |bits, k| bits | u8::from(l[k] != 1.0) << k | u8::from(l[k] == 0.0) << (k + 4)))
             .collect();
-        SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles: order.len(), leaves }
+        SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles, leaves }
     }
 }
 
