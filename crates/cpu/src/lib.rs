@@ -3,6 +3,7 @@
 
 pub mod blend;
 pub mod bvh;
+pub(crate) mod bvh_core;
 pub mod camera_rays;
 pub mod capsule;
 pub mod depth_merge;

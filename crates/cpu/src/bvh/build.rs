@@ -147,7 +147,7 @@ impl Packer<'_> {
                 self.packs.push((chunk, (first + count - chunk).min(4)));
             }
             self.leaves += 1;
-            return LEAF | start << LEAF_PACK_BITS | (n_packs as u32 - 1);
+            return leaf_ref(start, n_packs as u32 - 1);
         }
         // Triangles per part: a multiple of 4, at most four parts.
         let part = (n_packs.div_ceil(4) * 4) as u32;
@@ -159,7 +159,7 @@ impl Packer<'_> {
             let mut b = Bounds::EMPTY;
             self.prims[s as usize..(s + c) as usize].iter().for_each(|p| b.grow(&p.bounds()));
             let r = self.leaf(s, c, nodes);
-            node.set(k, &b, r);
+            node.set(k, b.min, b.max, r);
         }
         nodes[idx] = node;
         idx as u32
@@ -188,7 +188,7 @@ impl SceneBvh {
                 // A single leaf: a root node with one child.
                 nodes.push(Node4::EMPTY);
                 let r = packer.leaf(*first, *count, &mut nodes);
-                nodes[0].set(0, bounds, r);
+                nodes[0].set(0, bounds.min, bounds.max, r);
             }
             Some(inner) => {
                 collapse(inner, &mut nodes, &mut packer);
@@ -481,7 +481,8 @@ pub(super) fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, packer: &mut Packe
             let mut node = Node4::EMPTY;
             for (k, kid) in kids[..len].iter().enumerate() {
                 let r = collapse(kid, nodes, packer);
-                node.set(k, bounds_of(kid), r);
+                let b = bounds_of(kid);
+                node.set(k, b.min, b.max, r);
             }
             nodes[idx] = node;
             idx as u32

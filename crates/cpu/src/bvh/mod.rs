@@ -3,7 +3,9 @@
 //! Our own BVH rather than obvhs: a binned-SAH binary build (16 bins on all three axes; large
 //! nodes are binned in parallel, and the upper levels split in parallel with `rayon::join`),
 //! collapsed into a 4-wide BVH whose four child boxes are tested at once with 4-lane SIMD (glam
-//! `Vec4`), as Embree's BVH4 does. Traversal is tuned for the two ray kinds of paper 1:
+//! `Vec4`), as Embree's BVH4 does. The node layout, leaf references and the ordered closest-hit
+//! walk are [`crate::bvh_core`]'s, shared with the sphere BVH. Traversal is tuned for the two ray
+//! kinds of paper 1:
 //! - `closest_hit`: ordered traversal (hit children sorted by entry distance, nearest first);
 //!   stacked entries farther than the closest hit so far are skipped; the hit is the least
 //!   `(t, pack slot)` pair, so it does not depend on the order leaves are visited in;
@@ -31,6 +33,8 @@ use rayon::prelude::*;
 
 use hybrid_core::prepare::{PreparedScene, SHADOW_EVALUATE, TriangleRef};
 
+use crate::bvh_core::{EMPTY_SLOT, LEAF, LEAF_COUNT_BITS, Node4, leaf_parts, leaf_ref};
+
 /// A ray–triangle hit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hit {
@@ -41,52 +45,15 @@ pub struct Hit {
     pub bary: Vec3,
 }
 
-/// A 4-wide node (SoA child boxes, tested together with 4-lane SIMD): `planes[axis]` /
-/// `planes[3 + axis]` hold the four children's box minima/maxima on that axis (one array, so a
-/// ray picks its entry and exit planes by precomputed index instead of a per-node select). `child[k]` is an inner node index,
-/// a leaf reference (`LEAF | first pack << LEAF_PACK_BITS | (packs − 1)`), or [`EMPTY_SLOT`]
-/// (its box is empty, so no ray enters it).
-#[derive(Debug, Clone, Copy)]
-#[repr(C, align(64))]
-struct Node4 {
-    planes: [Vec4; 6],
-    child: [u32; 4],
-}
-
-const LEAF: u32 = 1 << 31;
-/// Low bits of a leaf reference that hold its pack count − 1.
-const LEAF_PACK_BITS: u32 = 4;
-/// Most packs one leaf reference can name; larger leaves are split under an extra node.
-const MAX_LEAF_PACKS: usize = 1 << LEAF_PACK_BITS;
-const EMPTY_SLOT: u32 = u32::MAX;
+/// Most packs one leaf reference can name; larger leaves are split under an extra node. A leaf
+/// reference's count bits hold its pack count − 1.
+const MAX_LEAF_PACKS: usize = 1 << LEAF_COUNT_BITS;
 
 /// The packs of a leaf reference.
 #[inline(always)]
 fn leaf_packs(c: u32) -> std::ops::Range<usize> {
-    let first = ((c & !LEAF) >> LEAF_PACK_BITS) as usize;
-    first..first + (c & (MAX_LEAF_PACKS as u32 - 1)) as usize + 1
-}
-
-impl Node4 {
-    const EMPTY: Node4 = Node4 {
-        planes: [Vec4::INFINITY, Vec4::INFINITY, Vec4::INFINITY, Vec4::NEG_INFINITY, Vec4::NEG_INFINITY, Vec4::NEG_INFINITY],
-        child: [EMPTY_SLOT; 4],
-    };
-    fn set(&mut self, k: usize, b: &Bounds, child: u32) {
-        for axis in 0..3 {
-            self.planes[axis][k] = b.min[axis];
-            self.planes[3 + axis][k] = b.max[axis];
-        }
-        self.child[k] = child;
-    }
-    #[cfg(test)]
-    fn lo(&self, axis: usize) -> Vec4 {
-        self.planes[axis]
-    }
-    #[cfg(test)]
-    fn hi(&self, axis: usize) -> Vec4 {
-        self.planes[3 + axis]
-    }
+    let (first, count) = leaf_parts(c);
+    first..first + count as usize + 1
 }
 
 /// A ray prepared for node tests: origin and inverse direction splatted per axis, and the
@@ -183,6 +150,7 @@ mod traverse;
 
 pub use packet::{PACKET, PacketRay};
 
+#[cfg(test)]
 use build::*;
 use traverse::*;
 

@@ -18,6 +18,7 @@
 //! into one packet per octant, so that a packet's rays enter every box through the same planes.
 
 use super::*;
+use crate::bvh_core::STACK_LEN;
 use crate::isa;
 
 /// Most rays in one packet.
@@ -56,7 +57,7 @@ const NO_ENTRY: Entry = Entry { node: 0, mask: 0, near: [0.0; PACKET] };
 
 thread_local! {
     /// Per-thread packet traversal stack (18 KiB: too large to zero for every packet).
-    static PACKET_STACK: std::cell::RefCell<[Entry; STACK_LEN]> = const { std::cell::RefCell::new([NO_ENTRY; STACK_LEN]) };
+    static PACKET_STACK: std::cell::RefCell<[Entry; TRI_STACK_LEN]> = const { std::cell::RefCell::new([NO_ENTRY; TRI_STACK_LEN]) };
 }
 
 impl SceneBvh {
@@ -90,7 +91,7 @@ impl SceneBvh {
             octant[i] = u8::from(inv.x < 0.0) | u8::from(inv.y < 0.0) << 1 | u8::from(inv.z < 0.0) << 2;
         }
         let mut todo = (1u32 << rays.len()) - 1;
-        let mut trace = |stack: &mut [Entry; STACK_LEN]| {
+        let mut trace = |stack: &mut [Entry; TRI_STACK_LEN]| {
             while todo != 0 {
                 let oct = octant[todo.trailing_zeros() as usize & (PACKET - 1)];
                 let mask = (0..rays.len()).filter(|&i| octant[i] == oct).fold(0u32, |m, i| m | 1 << i) & todo;
@@ -106,7 +107,7 @@ impl SceneBvh {
         };
         PACKET_STACK.with(|cell| match cell.try_borrow_mut() {
             Ok(mut stack) => trace(&mut stack),
-            Err(_) => trace(&mut Box::new([NO_ENTRY; STACK_LEN])),
+            Err(_) => trace(&mut Box::new([NO_ENTRY; TRI_STACK_LEN])),
         });
         for (i, &(_, _, t_max)) in rays.iter().enumerate() {
             if best.t[i] < t_max {
@@ -123,7 +124,7 @@ impl SceneBvh {
     #[allow(clippy::too_many_arguments)]
     fn packet_with(
         &self,
-        stack: &mut [Entry; STACK_LEN],
+        stack: &mut [Entry; TRI_STACK_LEN],
         single: &mut [u64; STACK_LEN],
         p: &Packet,
         best: &mut Best,
@@ -134,7 +135,7 @@ impl SceneBvh {
         let neg = |a: usize| oct >> a & 1 != 0;
         let near_plane = [0, 1, 2].map(|a| if neg(a) { 3 + a } else { a });
         let far_plane = [0, 1, 2].map(|a| if neg(a) { a } else { 3 + a });
-        const WRAP: usize = STACK_LEN - 1;
+        const WRAP: usize = TRI_STACK_LEN - 1;
         let mut sp = 0usize;
         let (mut cur, mut cur_mask) = (0u32, mask);
         // Rays that finished on their own.
@@ -184,7 +185,7 @@ impl SceneBvh {
                             count += 1;
                         }
                     }
-                    debug_assert!(sp + count <= STACK_LEN, "packet stack overflow");
+                    debug_assert!(sp + count <= TRI_STACK_LEN, "packet stack overflow");
                     for &(_, k) in order[1..count].iter().rev() {
                         stack[sp & WRAP] = Entry { node: n.child[k], mask: hits[k], near: near[k] };
                         sp += 1;

@@ -2,6 +2,7 @@
 //! that shadow rays use.
 
 use super::*;
+use crate::bvh_core::{NodeTest, STACK_LEN, closest_walk};
 use crate::isa;
 
 impl SceneBvh {
@@ -36,57 +37,22 @@ impl SceneBvh {
     }
 
     /// The closest-hit traversal of the subtree of `start` (a node index or a leaf reference),
-    /// improving on `closest`.
+    /// improving on `closest`: [`closest_walk`] with the exact slab test and the leaves' packs.
     #[inline(always)]
     pub(super) fn closest_from(&self, stack: &mut [u64; STACK_LEN], r: &RayPre, t_min: f32, start: u32, closest: &mut ClosestSoFar) {
+        let (mut best, mut best_uv) = (closest.slot, closest.uv);
         let mut best_t = closest.t;
-        let mut best = closest.slot;
-        let mut best_uv = closest.uv;
-        // Entries still to visit are `stack[..sp]`, indexed modulo the power-of-two length (no
-        // bounds check; it cannot fill, see `STACK_LEN`).
-        const WRAP: usize = STACK_LEN - 1;
-        let mut sp = 0usize;
-        let mut cur = start;
-        loop {
-            if cur & LEAF == 0 {
-                let n = &self.nodes[cur as usize];
-                let (near, mask) = node_hits(n, r, t_min, best_t);
-                if mask != 0 {
-                    if mask & (mask - 1) == 0 {
-                        cur = n.child[mask.trailing_zeros() as usize & 3];
-                        continue;
-                    }
-                    // Several children: sort them by entry distance (farthest first) with a
-                    // branch-free sorting network on `distance bits << 32 | child` keys (entry
-                    // distances are ≥ t_min ≥ 0 for the rays we trace, so their bits order like
-                    // the floats; a wrong order would only cost time); stack all but the
-                    // nearest, visit that one. Children missed get key 0, also without a
-                    // branch (a hit's key is never 0: the root, node 0, is nobody's child).
-                    let near = near.to_array();
-                    let key = |c: usize| ((near[c].to_bits() as u64) << 32 | n.child[c] as u64) & (u64::from(mask >> c & 1)).wrapping_neg();
-                    let mut k = [key(0), key(1), key(2), key(3)];
-                    let mut swap = |a: usize, b: usize| {
-                        let (x, y) = (k[a], k[b]);
-                        k[a] = x.max(y);
-                        k[b] = x.min(y);
-                    };
-                    swap(0, 1);
-                    swap(2, 3);
-                    swap(0, 2);
-                    swap(1, 3);
-                    swap(1, 2);
-                    let hits = mask.count_ones() as usize;
-                    // All three written, the stack grown by the hits but the nearest.
-                    debug_assert!(sp + 3 <= STACK_LEN, "closest-hit stack overflow");
-                    for (j, &key) in k[..3].iter().enumerate() {
-                        stack[(sp + j) & WRAP] = key;
-                    }
-                    sp += hits - 1;
-                    cur = k[(hits - 1) & 3] as u32;
-                    continue;
-                }
-            } else {
-                let range = leaf_packs(cur);
+        let test = ExactSlabs { r, t_min };
+        closest_walk(
+            &self.nodes,
+            stack,
+            0,
+            start,
+            &mut best_t,
+            &test,
+            #[inline(always)]
+            |leaf: u32, mut best_t: f32| {
+                let range = leaf_packs(leaf);
                 let first = range.start;
                 for (pi, pack) in self.packs[range].iter().enumerate() {
                     let (t, u, v, mut mask) = intersect4_upto(pack, r, t_min, best_t);
@@ -104,21 +70,10 @@ impl SceneBvh {
                         }
                     }
                 }
-            }
-            // Pop the next entry that starts before the closest hit so far.
-            loop {
-                if sp == 0 {
-                    *closest = ClosestSoFar { t: best_t, slot: best, uv: best_uv };
-                    return;
-                }
-                sp -= 1;
-                let key = stack[sp & WRAP];
-                if f32::from_bits((key >> 32) as u32) <= best_t {
-                    cur = key as u32;
-                    break;
-                }
-            }
-        }
+                (best_t, false)
+            },
+        );
+        *closest = ClosestSoFar { t: best_t, slot: best, uv: best_uv };
     }
 
     /// Whether a triangle whose material casts shadows and is not fully transparent is hit
@@ -162,8 +117,8 @@ impl SceneBvh {
         // The nodes still to visit are `stack[..sp]`: a fixed array indexed modulo its
         // power-of-two length, so that no bounds or capacity check sits in the loop (a `Vec`'s
         // push and pop were measurably slower). It cannot fill: see `STACK_LEN`.
-        let mut stack = [0u32; STACK_LEN];
-        const WRAP: usize = STACK_LEN - 1;
+        let mut stack = [0u32; TRI_STACK_LEN];
+        const WRAP: usize = TRI_STACK_LEN - 1;
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
@@ -174,7 +129,7 @@ impl SceneBvh {
                     cur = n.child[mask.trailing_zeros() as usize & 3];
                     mask &= mask - 1;
                     while mask != 0 {
-                        debug_assert!(sp < STACK_LEN, "any-hit stack overflow");
+                        debug_assert!(sp < TRI_STACK_LEN, "any-hit stack overflow");
                         stack[sp & WRAP] = n.child[mask.trailing_zeros() as usize & 3];
                         sp += 1;
                         mask &= mask - 1;
@@ -213,10 +168,28 @@ pub(super) struct ClosestSoFar {
     pub(super) uv: (f32, f32),
 }
 
-/// Length of the traversal stacks (a power of two). A 4-wide node stacks at most three
-/// children, and a path is at most `MAX_DEPTH` (56) nodes deep plus the ≤ 8 levels
-/// `Packer::leaf` adds above an oversized leaf, so at most 192 entries are ever stacked.
-pub(super) const STACK_LEN: usize = 256;
+/// Length of the any-hit and packet traversal stacks (a power of two; the closest-hit walk's is
+/// [`STACK_LEN`]). A 4-wide node stacks at most three children, and a path is at most
+/// `MAX_DEPTH` (56) nodes deep plus the ≤ 8 levels `Packer::leaf` adds above an oversized leaf,
+/// so at most 192 entries are ever stacked.
+pub(super) const TRI_STACK_LEN: usize = 256;
+
+/// The triangle BVH's node test: the exact slab test of [`node_hits`] from `t_min`.
+pub(super) struct ExactSlabs<'a> {
+    pub(super) r: &'a RayPre,
+    pub(super) t_min: f32,
+}
+
+impl NodeTest for ExactSlabs<'_> {
+    #[inline(always)]
+    fn enter(&self, n: &Node4, best_t: f32) -> (Vec4, u32) {
+        node_hits(n, self.r, self.t_min, best_t)
+    }
+    #[inline(always)]
+    fn may_enter(&self, near: f32, best_t: f32) -> bool {
+        near <= best_t
+    }
+}
 
 thread_local! {
     /// Per-thread closest-hit traversal stack, reused from ray to ray (its 64-bit entries

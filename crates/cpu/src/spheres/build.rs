@@ -164,7 +164,7 @@ pub(super) fn build_node(items: &mut [Item], base: usize, cb: Bounds, r: f32, de
 pub(super) fn build_serial(items: &mut [Item], base: usize, cb: Bounds, r: f32, depth: u32, nodes: &mut Vec<Node>) -> u32 {
     let n = items.len();
     if n <= LEAF_MAX {
-        return LEAF | ((base as u32) << 4) | n as u32;
+        return leaf_ref(base as u32, n as u32);
     }
     let (mid, lb, rb) = split_items(items, cb, r, depth);
     let (left_items, right_items) = items.split_at_mut(mid);
@@ -285,11 +285,8 @@ pub(super) fn collapse(nodes2: &[Node], root: u32, out: &mut Vec<Node4>) -> u32 
     out.push(Node4::EMPTY);
     let mut node = Node4::EMPTY;
     for (lane, &(r, lo, hi)) in kids[..k].iter().enumerate() {
-        node.child[lane] = collapse(nodes2, r, out);
-        for a in 0..3 {
-            node.min[a][lane] = lo[a];
-            node.max[a][lane] = hi[a];
-        }
+        let child = collapse(nodes2, r, out);
+        node.set(lane, Vec3A::from(lo), Vec3A::from(hi), child);
     }
     out[idx] = node;
     idx as u32
@@ -316,11 +313,8 @@ pub(super) fn collapse_par(nodes2: &[Node], root: u32, depth: u32) -> Subtree4 {
     nodes.push(node);
     for (lane, (sub, &(_, lo, hi))) in subs.into_iter().zip(&kids[..k]).enumerate() {
         let off = nodes.len() as u32;
-        node.child[lane] = if sub.root & LEAF != 0 { sub.root } else { sub.root + off };
-        for a in 0..3 {
-            node.min[a][lane] = lo[a];
-            node.max[a][lane] = hi[a];
-        }
+        let child = if sub.root & LEAF != 0 { sub.root } else { sub.root + off };
+        node.set(lane, Vec3A::from(lo), Vec3A::from(hi), child);
         nodes.extend(sub.nodes.into_iter().map(|mut n| {
             for c in &mut n.child {
                 if *c & LEAF == 0 {

@@ -7,12 +7,13 @@
 //!   count or timing (deterministic).
 //! - **Layout** (memory): the binary tree is collapsed into 4-wide nodes (each opens the child
 //!   of largest area until it has four), holding their children's boxes as structure of arrays
-//!   (112 B per node, about one node per 6 spheres). Centres are stored in leaf order as three
+//!   (the [`crate::bvh_core`] node the triangle BVH uses too: 128 B per node, about one node per
+//!   6 spheres). Centres are stored in leaf order as three
 //!   per-axis arrays (12 B/sphere) with their original index (4 B/sphere). [`SphereBvh::bytes`]
 //!   reports the total (about 34 B per sphere).
-//! - **Trace**: ordered depth-first traversal: the four children's slab tests in one SIMD pass,
-//!   the nearest entered child next, the others on a stack with their entry distances (skipped
-//!   when a closer hit has been found). A leaf's ≤ 4 spheres are tested at once with the exact
+//! - **Trace**: the core's ordered depth-first traversal ([`crate::bvh_core::closest_walk`]):
+//!   the four children's slab tests in one SIMD pass, the nearest entered child next, the others
+//!   on a stack with their entry distances (skipped when a closer hit has been found). A leaf's ≤ 4 spheres are tested at once with the exact
 //!   ray–sphere test in the perpendicular-distance form (KNOWN-GOOD gotcha 13), lane by lane the
 //!   same operations in the same order as the scalar [`ray_sphere`], so bit for bit its results:
 //!   project the centre on the ray and compare the squared distance of the centre from the ray
@@ -27,7 +28,9 @@
 //!   1M-point tree scan at 1080p (8×8 tiles) the rays' slab tests per frame fall from 14.1M to
 //!   4.3M (1.6M tree nodes, 2.6M of the cuts' own nodes), plus 0.34M to build the 18,490 cuts.
 
-use glam::{Vec3, Vec4};
+use glam::{Vec3, Vec3A, Vec4};
+
+use crate::bvh_core::{EMPTY_SLOT, LEAF, Node4, STACK_LEN, leaf_parts, leaf_ref};
 
 /// Spheres per leaf at most.
 const LEAF_MAX: usize = 4;
@@ -35,18 +38,13 @@ const LEAF_MAX: usize = 4;
 const BINS: usize = 16;
 /// Subtrees with more spheres than this are built with `rayon::join`.
 const PARALLEL_MIN: usize = 16 * 1024;
-/// Leaf reference flag; a leaf reference holds `start << 4 | count`.
-const LEAF: u32 = 1 << 31;
-/// Traversal stack capacity reserved up front (it grows past it if needed: up to 3 pushes per level).
-const STACK: usize = 96;
-
-/// A reusable traversal stack (subtree reference, entry distance).
+/// A reusable traversal stack (the core's: entry distance and subtree reference per entry).
 #[derive(Debug, Clone)]
-pub struct TraversalStack(Vec<(u32, f32)>);
+pub struct TraversalStack(Box<[u64; STACK_LEN]>);
 
 impl Default for TraversalStack {
     fn default() -> Self {
-        Self(Vec::with_capacity(STACK))
+        Self(Box::new([0; STACK_LEN]))
     }
 }
 /// Relative slack of the slab test for rays with `t_min ≥ 0` (see [`Ray::slab4`]).
@@ -98,20 +96,6 @@ struct Node {
     y: Vec4,
     z: Vec4,
     child: [u32; 2],
-}
-
-/// One 4-wide node: its ≤ 4 children's boxes, one 4-lane vector per bound (structure of arrays, so
-/// the four slab tests are a few SIMD operations), and their references (an inner-node index, or
-/// `LEAF | start << 4 | count`). Unused slots have an empty box (+∞ … −∞), which no ray enters.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Node4 {
-    min: [Vec4; 3],
-    max: [Vec4; 3],
-    child: [u32; 4],
-}
-
-impl Node4 {
-    const EMPTY: Self = Self { min: [Vec4::INFINITY; 3], max: [Vec4::NEG_INFINITY; 3], child: [LEAF; 4] };
 }
 
 /// A sphere BVH. Directions passed to [`SphereBvh::closest_hit`] need not be unit length.

@@ -2,6 +2,7 @@
 //! from a shared cut, and the exact perpendicular-distance sphere tests they end in.
 
 use super::*;
+use crate::bvh_core::{NodeTest, closest_walk, stack_entry};
 
 impl SphereBvh {
     /// The closest sphere hit by the ray `origin + t·dir` with `t_min ≤ t ≤ t_max`: the hit `t`
@@ -46,11 +47,10 @@ impl SphereBvh {
         let (ray, len) = self.prepare(origin, dir, t_min, t_max)?;
         // Entry distances are never negative when `t_min` is not: the cheaper slab form applies.
         let stack = &mut stack.0;
-        stack.clear();
         if ray.t_min >= 0.0 {
-            self.traverse::<true, ANY>(stack, &ray, len, self.root)
+            self.traverse::<true, ANY>(stack, 0, &ray, len, self.root)
         } else {
-            self.traverse::<false, ANY>(stack, &ray, len, self.root)
+            self.traverse::<false, ANY>(stack, 0, &ray, len, self.root)
         }
     }
 
@@ -110,13 +110,12 @@ impl SphereBvh {
         for (p, hit) in scratch.rays.iter().zip(hits.iter_mut()) {
             *hit = None;
             let Some((ray, len)) = p else { continue };
-            stack.clear();
             if ray.t_min < 0.0 {
-                *hit = self.traverse::<false, false>(stack, ray, *len, self.root);
+                *hit = self.traverse::<false, false>(stack, 0, ray, *len, self.root);
                 continue;
             }
             if !cut {
-                *hit = self.traverse::<true, false>(stack, ray, *len, self.root);
+                *hit = self.traverse::<true, false>(stack, 0, ray, *len, self.root);
                 continue;
             }
             // The cut's entries this ray enters, in the cut's order (nearest first for the
@@ -142,8 +141,10 @@ impl SphereBvh {
             if k == 0 {
                 continue;
             }
-            stack.extend(order[1..k].iter().rev());
-            *hit = self.traverse::<true, false>(stack, ray, *len, order[0].0);
+            for (j, &(child, near)) in order[1..k].iter().rev().enumerate() {
+                stack[j] = stack_entry(child, near);
+            }
+            *hit = self.traverse::<true, false>(stack, k - 1, ray, *len, order[0].0);
         }
     }
 
@@ -178,9 +179,9 @@ impl SphereBvh {
                 let (l, h) = (Vec4::splat(lo[a]), Vec4::splat(hi[a]));
                 let oa = Vec4::splat(o[a]);
                 let (p_near, p_far) = if lo[a] > 0.0 {
-                    (n.min[a], n.max[a])
+                    (n.lo(a), n.hi(a))
                 } else if hi[a] < 0.0 {
-                    (n.max[a], n.min[a])
+                    (n.hi(a), n.lo(a))
                 } else {
                     continue;
                 };
@@ -202,11 +203,11 @@ impl SphereBvh {
                 while mask != 0 {
                     let lane = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
-                    if n.child[lane] == LEAF {
+                    if n.child[lane] == EMPTY_SLOT {
                         continue;
                     }
-                    let lo = Vec3::new(n.min[0][lane], n.min[1][lane], n.min[2][lane]);
-                    let hi = Vec3::new(n.max[0][lane], n.max[1][lane], n.max[2][lane]);
+                    let (lo, hi) = n.child_box(lane);
+                    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
                     if n.child[lane] & LEAF == 0 {
                         let e = hi - lo;
                         open.push(((e.x * e.y + e.y * e.z + e.z * e.x).to_bits(), cut.len() as u32));
@@ -239,11 +240,7 @@ impl SphereBvh {
         for group in cut.chunks(4) {
             let mut node = Node4::EMPTY;
             for (lane, c) in group.iter().enumerate() {
-                node.child[lane] = c.child;
-                for a in 0..3 {
-                    node.min[a][lane] = c.lo[a];
-                    node.max[a][lane] = c.hi[a];
-                }
+                node.set(lane, Vec3A::from(c.lo), Vec3A::from(c.hi), c.child);
             }
             scratch.chunks.push(node);
         }
@@ -254,8 +251,8 @@ impl SphereBvh {
             let mut top = Node4::EMPTY;
             for (lane, c) in group.iter().enumerate() {
                 for a in 0..3 {
-                    top.min[a][lane] = c.min[a].min_element();
-                    top.max[a][lane] = c.max[a].max_element();
+                    top.planes[a][lane] = c.lo(a).min_element();
+                    top.planes[3 + a][lane] = c.hi(a).max_element();
                 }
             }
             scratch.tops.push(top);
@@ -263,13 +260,15 @@ impl SphereBvh {
         true
     }
 
-    /// Ordered depth-first traversal from the subtree `root`, then the subtrees on `stack`
-    /// (see the module notes). `NONNEG`: the ray's `t_min` is ≥ 0 (see [`Ray::slab4`]). `ANY`:
-    /// return the first hit found instead of the closest (for occlusion queries).
+    /// Ordered depth-first traversal from the subtree `root`, then the entries `stack[..sp]`:
+    /// [`closest_walk`] with [`Ray::slab4`] and the leaves' spheres four at a time. `NONNEG`: the
+    /// ray's `t_min` is ≥ 0 (see [`Ray::slab4`]). `ANY`: return the first hit found instead of
+    /// the closest (for occlusion queries).
     #[inline]
     pub(super) fn traverse<const NONNEG: bool, const ANY: bool>(
         &self,
-        stack: &mut Vec<(u32, f32)>,
+        stack: &mut [u64; STACK_LEN],
+        sp: usize,
         ray: &Ray,
         len: f32,
         root: u32,
@@ -277,76 +276,54 @@ impl SphereBvh {
         let mut best_t = ray.t_max;
         let mut best = u32::MAX;
         let mut best_slot = 0u32;
-        let mut cur = root;
-        loop {
-            if cur & LEAF != 0 {
-                let start = ((cur & !LEAF) >> 4) as usize;
-                let count = cur & 0xF;
-                let hits = ray.spheres4(&self.xs[start..], &self.ys[start..], &self.zs[start..], best_t, count);
-                if let Some((t4, mut mask)) = hits {
-                    let t4 = t4.to_array();
-                    if ANY {
-                        let lane = mask.trailing_zeros() as usize;
-                        return Some((t4[lane] / len, (start + lane) as u32));
-                    }
-                    while mask != 0 {
-                        let lane = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        let (t, slot) = (t4[lane], start + lane);
-                        let idx = self.indices[slot];
-                        if t < best_t || (t == best_t && idx < best) {
-                            best_t = t;
-                            best = idx;
-                            best_slot = slot as u32;
-                        }
-                    }
-                }
-            } else {
-                let n = &self.nodes[cur as usize];
-                let (entry, mut mask) = ray.slab4::<NONNEG>(n, best_t);
-                if mask != 0 {
-                    let first = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    if mask == 0 {
-                        cur = n.child[first];
-                        continue;
-                    }
-                    // Several children: visit the nearest now, push the others farthest first.
-                    let entry = entry.to_array();
-                    let mut order = [(0u32, 0f32); 4];
-                    order[0] = (n.child[first], entry[first]);
-                    let mut k = 1;
-                    while mask != 0 {
-                        let lane = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        let item = (n.child[lane], entry[lane]);
-                        // Insertion sort by entry distance, nearest first.
-                        let mut j = k;
-                        while j > 0 && order[j - 1].1 > item.1 {
-                            order[j] = order[j - 1];
-                            j -= 1;
-                        }
-                        order[j] = item;
-                        k += 1;
-                    }
-                    for &o in order[1..k].iter().rev() {
-                        stack.push(o);
-                    }
-                    cur = order[0].0;
-                    continue;
-                }
-            }
-            // Pop the next subtree that can still hold a closer hit.
-            loop {
-                let Some((r, e)) = stack.pop() else {
-                    return if best == u32::MAX { None } else { Some((best_t / len, best_slot)) };
+        closest_walk(
+            &self.nodes,
+            stack,
+            sp,
+            root,
+            &mut best_t,
+            &PaddedSlabs::<NONNEG>(ray),
+            #[inline(always)]
+            |leaf: u32, mut best_t: f32| {
+                let (start, count) = leaf_parts(leaf);
+                let Some((t4, mut mask)) = ray.spheres4(&self.xs[start..], &self.ys[start..], &self.zs[start..], best_t, count) else {
+                    return (best_t, false);
                 };
-                if Ray::may_enter::<NONNEG>(e, best_t) {
-                    cur = r;
-                    break;
+                let t4 = t4.to_array();
+                if ANY {
+                    let lane = mask.trailing_zeros() as usize;
+                    (best, best_slot) = (0, (start + lane) as u32);
+                    return (t4[lane], true);
                 }
-            }
-        }
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let (t, slot) = (t4[lane], start + lane);
+                    let idx = self.indices[slot];
+                    if t < best_t || (t == best_t && idx < best) {
+                        best_t = t;
+                        best = idx;
+                        best_slot = slot as u32;
+                    }
+                }
+                (best_t, false)
+            },
+        );
+        if best == u32::MAX { None } else { Some((best_t / len, best_slot)) }
+    }
+}
+
+/// The sphere BVH's node test: [`Ray::slab4`] and [`Ray::may_enter`].
+struct PaddedSlabs<'a, const NONNEG: bool>(&'a Ray);
+
+impl<const NONNEG: bool> NodeTest for PaddedSlabs<'_, NONNEG> {
+    #[inline(always)]
+    fn enter(&self, n: &Node4, best_t: f32) -> (Vec4, u32) {
+        self.0.slab4::<NONNEG>(n, best_t)
+    }
+    #[inline(always)]
+    fn may_enter(&self, near: f32, best_t: f32) -> bool {
+        Ray::may_enter::<NONNEG>(near, best_t)
     }
 }
 
@@ -463,8 +440,8 @@ impl Ray {
         let axis = |a: usize| {
             let o = Vec4::splat(self.o[a]);
             let inv = Vec4::splat(self.inv[a]);
-            let t0 = (n.min[a] - o) * inv;
-            let t1 = (n.max[a] - o) * inv;
+            let t0 = (n.lo(a) - o) * inv;
+            let t1 = (n.hi(a) - o) * inv;
             if self.inv[a] < 0.0 { (t1, t0) } else { (t0, t1) }
         };
         let (nx, fx) = axis(0);
