@@ -2,6 +2,7 @@
 //! levels), then the collapse into 4-wide nodes and leaf packs. Deterministic for any thread count.
 
 use super::*;
+use crate::bvh_core::{BinaryTree, LeafSink, collapse};
 use crate::isa;
 
 pub(super) const BINS: usize = 16;
@@ -180,20 +181,22 @@ impl SceneBvh {
             build_rec(&mut prims, pb, 0, 0)
         });
 
-        let mut nodes = Vec::with_capacity(prims.len() / 8);
-        let mut packer = Packer { prims: &prims, packs: Vec::with_capacity(prims.len() / 3), leaves: 0 };
-        match &root {
-            None => {}
+        let node_capacity = prims.len() / 8;
+        let new_packer = || Packer { prims: &prims, packs: Vec::with_capacity(prims.len() / 3), leaves: 0 };
+        let (nodes, packer) = match &root {
+            None => (Vec::new(), new_packer()),
             Some(BuildNode::Leaf { bounds, first, count }) => {
                 // A single leaf: a root node with one child.
-                nodes.push(Node4::EMPTY);
+                let (mut nodes, mut packer) = (vec![Node4::EMPTY], new_packer());
                 let r = packer.leaf(*first, *count, &mut nodes);
                 nodes[0].set(0, bounds.min, bounds.max, r);
+                (nodes, packer)
             }
             Some(inner) => {
-                collapse(inner, &mut nodes, &mut packer);
+                let c = collapse(&BuildTree(std::marker::PhantomData), inner, 0, node_capacity, &new_packer);
+                (c.nodes, c.sink)
             }
-        }
+        };
         drop(root);
         let Packer { packs: descs, leaves, .. } = packer;
 
@@ -452,40 +455,34 @@ pub(super) fn bounds_of(n: &BuildNode) -> &Bounds {
     }
 }
 
-/// Collapses the binary build tree into 4-wide nodes (each node takes up to four descendants,
-/// opening the largest-area inner child first), packing leaves on the way; returns the
-/// reference to `n`.
-pub(super) fn collapse(n: &BuildNode, nodes: &mut Vec<Node4>, packer: &mut Packer) -> u32 {
-    match n {
-        BuildNode::Leaf { first, count, .. } => packer.leaf(*first, *count, nodes),
-        BuildNode::Inner { children, .. } => {
-            let mut kids: [&BuildNode; 4] = [&children.0, &children.1, &children.1, &children.1];
-            let mut len = 2;
-            while len < 4 {
-                let open = kids[..len]
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, k)| matches!(k, BuildNode::Inner { .. }))
-                    .max_by(|a, b| bounds_of(a.1).half_area().total_cmp(&bounds_of(b.1).half_area()))
-                    .map(|(i, _)| i);
-                let Some(i) = open else { break };
-                if let BuildNode::Inner { children, .. } = kids[i] {
-                    kids.copy_within(i + 1..len, i + 2);
-                    kids[i] = &children.0;
-                    kids[i + 1] = &children.1;
-                    len += 1;
-                }
-            }
-            let idx = nodes.len();
-            nodes.push(Node4::EMPTY);
-            let mut node = Node4::EMPTY;
-            for (k, kid) in kids[..len].iter().enumerate() {
-                let r = collapse(kid, nodes, packer);
-                let b = bounds_of(kid);
-                node.set(k, b.min, b.max, r);
-            }
-            nodes[idx] = node;
-            idx as u32
+/// The binary build tree, for [`collapse`] (its nodes are their own references).
+pub(super) struct BuildTree<'a>(std::marker::PhantomData<&'a BuildNode>);
+
+impl<'a> BinaryTree for BuildTree<'a> {
+    type Ref = &'a BuildNode;
+    fn children(&self, r: &'a BuildNode) -> Option<[&'a BuildNode; 2]> {
+        match r {
+            BuildNode::Leaf { .. } => None,
+            BuildNode::Inner { children, .. } => Some([&children.0, &children.1]),
         }
+    }
+    fn bounds(&self, r: &'a BuildNode) -> (Vec3A, Vec3A) {
+        let b = bounds_of(r);
+        (b.min, b.max)
+    }
+}
+
+impl<'a> LeafSink<&'a BuildNode> for Packer<'_> {
+    fn leaf(&mut self, r: &'a BuildNode, nodes: &mut Vec<Node4>) -> u32 {
+        match r {
+            BuildNode::Leaf { first, count, .. } => Packer::leaf(self, *first, *count, nodes),
+            BuildNode::Inner { .. } => unreachable!("the collapse hands over leaves only"),
+        }
+    }
+    fn append(&mut self, later: Self) -> u32 {
+        let offset = self.packs.len() as u32;
+        self.packs.extend(later.packs);
+        self.leaves += later.leaves;
+        offset
     }
 }

@@ -2,6 +2,7 @@
 //! into 4-wide nodes in parallel.
 
 use super::*;
+use crate::bvh_core::{BinaryTree, LeafSink, collapse};
 
 /// Build-time item: a centre and its original index (16 bytes).
 #[derive(Debug, Clone, Copy)]
@@ -52,12 +53,6 @@ pub(super) struct Subtree {
     pub(super) root: u32,
 }
 
-/// A collapsed subtree: its 4-wide nodes in depth-first order and its root reference (local).
-pub(super) struct Subtree4 {
-    pub(super) nodes: Vec<Node4>,
-    pub(super) root: u32,
-}
-
 impl SphereBvh {
     /// Builds the BVH over spheres of one `radius` at `centers`.
     pub fn build(centers: &[Vec3], radius: f32) -> Result<Self, SphereBvhError> {
@@ -75,7 +70,7 @@ impl SphereBvh {
         let tree = if items.is_empty() { Subtree { nodes: Vec::new(), root: LEAF } } else { build_node(&mut items, 0, cb, radius, 0) };
         let (root_min, root_max) =
             if items.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (cb.min - Vec3::splat(radius), cb.max + Vec3::splat(radius)) };
-        let Subtree4 { nodes, root } = collapse_par(&tree.nodes, tree.root, 0);
+        let (nodes, root) = collapse_tree(&tree.nodes, tree.root);
         drop(tree);
         let axis = |a: usize| items.iter().map(|it| it.c[a]).chain([0.0; LEAF_MAX - 1]).collect::<Vec<f32>>();
         Ok(Self {
@@ -273,85 +268,42 @@ pub(super) fn append_offset(dst: &mut Vec<Node>, src: Vec<Node>, off: u32) {
     }));
 }
 
-/// The BVH2 subtree `root` (an index into `nodes2` or a leaf) as 4-wide nodes appended to `out`
-/// depth-first: each 4-wide node takes its BVH2 node's two children and opens the inner child of
-/// largest surface area until it has four (or only leaves are left). Returns its reference.
-pub(super) fn collapse(nodes2: &[Node], root: u32, out: &mut Vec<Node4>) -> u32 {
-    if root & LEAF != 0 {
-        return root;
+/// The sphere build's binary tree, for the core's [`collapse`]: a reference is a child reference
+/// (an index into the nodes or a leaf reference) with the box its parent holds for it.
+struct SphereTree<'a>(&'a [Node]);
+
+impl BinaryTree for SphereTree<'_> {
+    type Ref = (u32, Vec3A, Vec3A);
+    fn children(&self, (r, ..): Self::Ref) -> Option<[Self::Ref; 2]> {
+        if r & LEAF != 0 {
+            return None;
+        }
+        let n = &self.0[r as usize];
+        let kid = |l: usize| (n.child[l], Vec3A::new(n.x[l], n.y[l], n.z[l]), Vec3A::new(n.x[l + 2], n.y[l + 2], n.z[l + 2]));
+        Some([kid(0), kid(1)])
     }
-    let (kids, k) = open_kids(nodes2, root);
-    let idx = out.len();
-    out.push(Node4::EMPTY);
-    let mut node = Node4::EMPTY;
-    for (lane, &(r, lo, hi)) in kids[..k].iter().enumerate() {
-        let child = collapse(nodes2, r, out);
-        node.set(lane, Vec3A::from(lo), Vec3A::from(hi), child);
+    fn bounds(&self, (_, lo, hi): Self::Ref) -> (Vec3A, Vec3A) {
+        (lo, hi)
     }
-    out[idx] = node;
-    idx as u32
 }
 
-/// [`collapse`] with the top `COLLAPSE_PARALLEL_DEPTH` levels of 4-wide nodes in parallel: each
-/// child subtree collapsed on its own and stitched depth-first after its parent (the same nodes
-/// in the same order as the serial collapse).
-pub(super) fn collapse_par(nodes2: &[Node], root: u32, depth: u32) -> Subtree4 {
-    const COLLAPSE_PARALLEL_DEPTH: u32 = 2;
-    if root & LEAF != 0 {
-        return Subtree4 { nodes: Vec::new(), root };
+/// The sphere leaves' references are made by the build (slots in leaf order), so the collapse
+/// takes them as they are.
+struct SphereLeaves;
+
+impl LeafSink<(u32, Vec3A, Vec3A)> for SphereLeaves {
+    fn leaf(&mut self, (r, ..): (u32, Vec3A, Vec3A), _: &mut Vec<Node4>) -> u32 {
+        r
     }
-    if depth >= COLLAPSE_PARALLEL_DEPTH {
-        let mut nodes = Vec::new();
-        let root = collapse(nodes2, root, &mut nodes);
-        return Subtree4 { nodes, root };
+    fn append(&mut self, _: Self) -> u32 {
+        0
     }
-    let (kids, k) = open_kids(nodes2, root);
-    use rayon::prelude::*;
-    let subs: Vec<Subtree4> = kids[..k].par_iter().map(|&(r, _, _)| collapse_par(nodes2, r, depth + 1)).collect();
-    let mut node = Node4::EMPTY;
-    let mut nodes = Vec::with_capacity(1 + subs.iter().map(|s| s.nodes.len()).sum::<usize>());
-    nodes.push(node);
-    for (lane, (sub, &(_, lo, hi))) in subs.into_iter().zip(&kids[..k]).enumerate() {
-        let off = nodes.len() as u32;
-        let child = if sub.root & LEAF != 0 { sub.root } else { sub.root + off };
-        node.set(lane, Vec3A::from(lo), Vec3A::from(hi), child);
-        nodes.extend(sub.nodes.into_iter().map(|mut n| {
-            for c in &mut n.child {
-                if *c & LEAF == 0 {
-                    *c += off;
-                }
-            }
-            n
-        }));
-    }
-    nodes[0] = node;
-    Subtree4 { nodes, root: 0 }
 }
 
-/// The ≤ 4 children of the 4-wide node made from BVH2 node `root`: its two children, then the inner
-/// child of largest surface area opened until there are four (or only leaves are left).
-pub(super) fn open_kids(nodes2: &[Node], root: u32) -> ([(u32, Vec3, Vec3); 4], usize) {
-    let kids_of = |r: u32| {
-        let n = &nodes2[r as usize];
-        let lo = |l: usize| Vec3::new(n.x[l], n.y[l], n.z[l]);
-        [(n.child[0], lo(0), lo(2)), (n.child[1], lo(1), lo(3))]
-    };
-    let mut kids = [(LEAF, Vec3::ZERO, Vec3::ZERO); 4];
-    kids[..2].copy_from_slice(&kids_of(root));
-    let mut k = 2;
-    while k < 4 {
-        let area = |(_, lo, hi): (u32, Vec3, Vec3)| {
-            let e = hi - lo;
-            e.x * e.y + e.y * e.z + e.z * e.x
-        };
-        let open = (0..k).filter(|&i| kids[i].0 & LEAF == 0).max_by(|&a, &b| area(kids[a]).total_cmp(&area(kids[b])));
-        let Some(i) = open else { break };
-        let [a, b] = kids_of(kids[i].0);
-        kids[i] = a;
-        kids[k] = b;
-        k += 1;
-    }
-    (kids, k)
+/// The binary tree under `root` collapsed into 4-wide nodes, the top two levels in parallel.
+pub(super) fn collapse_tree(nodes2: &[Node], root: u32) -> (Vec<Node4>, u32) {
+    let c = collapse(&SphereTree(nodes2), (root, Vec3A::ZERO, Vec3A::ZERO), 2, 0, &|| SphereLeaves);
+    (c.nodes, c.root)
 }
 
 /// In-place partition: items for which `left` holds first; returns their count.
