@@ -174,6 +174,7 @@ impl SceneBvh {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bvh_core::build::Prim;
     use glam::Vec2;
     use hybrid_scene::{Material, Mesh, Object, ObjectSource, Scene, Transform};
     use rand::rngs::StdRng;
@@ -513,7 +514,7 @@ mod tests {
         let scene = soup_scene(150, 4, vec![Material::default()]);
         let p = PreparedScene::new(&scene);
         let corners: Vec<[Vec3; 3]> = p.triangles.iter().map(|t| p.triangle(*t)).collect();
-        let prims: Vec<Prim> = corners.iter().enumerate().map(|(i, c)| Prim::of_triangle(i as u32, *c)).collect();
+        let prims: Vec<Prim> = corners.iter().enumerate().map(|(i, c)| triangle_prim(i as u32, *c)).collect();
         let order: Vec<u32> = (0..150).collect();
         let mut packer = Packer { prims: &prims, packs: Vec::new(), leaves: 0 };
         let mut nodes = Vec::new();
@@ -542,38 +543,5 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&s| s == 1));
-    }
-
-    #[test]
-    fn the_index_lane_stays_out_of_the_builds_arithmetic() {
-        // The index's bits are a subnormal float (index 5 = 5 · 2⁻¹⁴⁹); what the build adds and
-        // multiplies must not carry it, or every operation stalls on Intel cores.
-        let p = Prim { lo: Vec4::new(1.0, 2.0, 3.0, f32::from_bits(5)), hi: Vec4::new(2.0, 3.0, 4.0, 0.0) };
-        assert_eq!(p.index(), 5);
-        assert!(p.lo.w.is_subnormal());
-        let b = p.bounds();
-        #[cfg(target_arch = "x86_64")]
-        for v in [p.centroid2(), b.min, b.max] {
-            // The SIMD register's fourth lane, which `Vec3A` hides.
-            let raw = Vec4::from(std::arch::x86_64::__m128::from(v));
-            assert!(!raw.w.is_subnormal(), "{v:?}: w = {:e}", raw.w);
-        }
-        assert_eq!(p.centroid2(), Vec3A::new(3.0, 5.0, 7.0));
-    }
-
-    #[test]
-    fn one_axis_bin_equals_simd_bins() {
-        let mut rng = StdRng::seed_from_u64(17);
-        let special = [0.0, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -1e30, f32::MIN_POSITIVE];
-        for k in 0..20_000 {
-            let mut r = || if k % 7 == 0 { special[rng.random_range(0..special.len())] } else { rng.random_range(-10.0f32..10.0) };
-            let (c, lo) = (Vec3A::new(r(), r(), r()), Vec3A::new(r(), r(), r()));
-            let scale = Vec3A::new(r().abs(), r().abs(), r().abs());
-            let nb = 4 + k % 13;
-            let all = bins_of(c, lo, scale, nb);
-            for axis in 0..3 {
-                assert_eq!(bin_of(c[axis], lo[axis], scale[axis], nb), all[axis], "{c} {lo} {scale} {nb}");
-            }
-        }
     }
 }

@@ -1,10 +1,9 @@
 //! A BVH over millions of equal-radius spheres (the RT-scene's point cloud, design §5).
 //!
-//! - **Build**: binned SAH (16 bins along the widest axis) over the sphere centres. With one
-//!   radius, a node's box is its centres' box grown by `r`, so the bins track centre bounds only.
-//!   The top of the tree is built in parallel with `rayon::join`; every subtree is laid out in
-//!   depth-first order and stitched by its parent, so the result does not depend on the thread
-//!   count or timing (deterministic).
+//! - **Build**: the [`crate::bvh_core`] binned SAH the triangle BVH uses too, over the spheres'
+//!   boxes (16 bins along the centres' widest axis, leaves of at most four spheres; see
+//!   `build::SPHERE_RULES`). The top of the tree is built in parallel with `rayon::join`, and the
+//!   result does not depend on the thread count or timing (deterministic).
 //! - **Layout** (memory): the binary tree is collapsed into 4-wide nodes (each opens the child
 //!   of largest area until it has four), holding their children's boxes as structure of arrays
 //!   (the [`crate::bvh_core`] node the triangle BVH uses too: 128 B per node, about one node per
@@ -34,10 +33,6 @@ use crate::bvh_core::{EMPTY_SLOT, LEAF, Node4, STACK_LEN, leaf_parts, leaf_ref};
 
 /// Spheres per leaf at most.
 const LEAF_MAX: usize = 4;
-/// SAH bins per axis.
-const BINS: usize = 16;
-/// Subtrees with more spheres than this are built with `rayon::join`.
-const PARALLEL_MIN: usize = 16 * 1024;
 /// A reusable traversal stack (the core's: entry distance and subtree reference per entry).
 #[derive(Debug, Clone)]
 pub struct TraversalStack(Box<[u64; STACK_LEN]>);
@@ -87,17 +82,6 @@ pub struct BatchScratch {
 /// Largest number of spheres (leaf starts have 27 bits).
 pub const MAX_SPHERES: usize = 1 << 27;
 
-/// One inner node: the boxes of its two children, one 4-lane vector per axis
-/// `(min left, min right, max left, max right)` so both slab tests run as a few SIMD operations,
-/// and the children's references (an inner-node index, or `LEAF | start << 4 | count`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Node {
-    x: Vec4,
-    y: Vec4,
-    z: Vec4,
-    child: [u32; 2],
-}
-
 /// A sphere BVH. Directions passed to [`SphereBvh::closest_hit`] need not be unit length.
 #[derive(Debug, Clone)]
 pub struct SphereBvh {
@@ -139,8 +123,6 @@ impl std::error::Error for SphereBvhError {}
 mod build;
 mod traverse;
 
-#[cfg(test)]
-use build::*;
 use traverse::*;
 pub use traverse::{PreparedRay, closest_hit_brute_force, ray_sphere, sphere_hits4};
 
@@ -302,14 +284,5 @@ mod tests {
             if any { blocked += 1 } else { clear += 1 }
         }
         assert!(blocked > 500 && clear > 500, "too little tested: {blocked} blocked, {clear} clear");
-    }
-
-    #[test]
-    fn partition_splits_by_predicate() {
-        let mut items: Vec<Item> = (0..37).map(|i| Item { c: [i as f32, 0.0, 0.0], index: i }).collect();
-        let mid = partition(&mut items, |it| it.index % 3 == 0);
-        assert_eq!(mid, 13);
-        assert!(items[..mid].iter().all(|it| it.index % 3 == 0));
-        assert!(items[mid..].iter().all(|it| it.index % 3 != 0));
     }
 }
