@@ -152,3 +152,76 @@ impl<R: Copy> std::ops::Deref for Kids<R> {
         &self.items[..self.len]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::build::{BuildNode, BuildRules, BuildTree, Prim, PrimBounds, build};
+    use super::*;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    /// Leaves of up to four primitives, as references to their positions.
+    struct Positions(usize);
+
+    impl<'a> LeafSink<&'a BuildNode> for Positions {
+        fn leaf(&mut self, r: &'a BuildNode, _: &mut Vec<Node4>) -> u32 {
+            let BuildNode::Leaf { first, count, .. } = r else { unreachable!() };
+            self.0 += 1;
+            leaf_ref(*first, *count)
+        }
+        fn append(&mut self, later: Self) -> u32 {
+            self.0 += later.0;
+            0
+        }
+    }
+
+    #[test]
+    fn parallel_collapse_equals_serial_and_covers_every_primitive() {
+        let rules = BuildRules {
+            traversal_cost: 1.0,
+            intersect_cost: 1.0,
+            leaf_units: |n| n as f32,
+            max_leaf: 4,
+            small_is_leaf: true,
+            leaf_at_depth: u32::MAX,
+            halve_at_depth: 64,
+            widest_axis_only: false,
+        };
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut prims: Vec<Prim> = (0..20_000)
+            .map(|i| {
+                let c = Vec3A::new(rng.random_range(-50.0..50.0), rng.random_range(-5.0..5.0), rng.random_range(-20.0..20.0));
+                Prim::new(i, c - Vec3A::splat(0.3), c + Vec3A::splat(0.3))
+            })
+            .collect();
+        let pb = PrimBounds::of(&prims);
+        let tree = build(&rules, &mut prims, pb, 0, 0);
+        let serial = collapse(&BuildTree::NEW, &tree, 0, 0, &|| Positions(0));
+        for levels in [1, 2, 3] {
+            let parallel = collapse(&BuildTree::NEW, &tree, levels, 0, &|| Positions(0));
+            assert_eq!((parallel.root, parallel.sink.0), (serial.root, serial.sink.0), "{levels} parallel levels");
+            assert!(parallel.nodes == serial.nodes, "{levels} parallel levels: other nodes");
+        }
+        // Every position in exactly one leaf, inside every box on its way down.
+        let mut seen = vec![0u32; prims.len()];
+        let mut todo = vec![(serial.root, Vec3A::splat(f32::NEG_INFINITY), Vec3A::splat(f32::INFINITY))];
+        while let Some((c, lo, hi)) = todo.pop() {
+            if c == EMPTY_SLOT {
+                continue;
+            }
+            if c & LEAF == 0 {
+                let n = &serial.nodes[c as usize];
+                todo.extend((0..4).map(|k| (n.child[k], n.child_box(k).0, n.child_box(k).1)));
+                continue;
+            }
+            let (first, count) = leaf_parts(c);
+            assert!((1..=4).contains(&count));
+            for p in &prims[first..first + count as usize] {
+                seen[p.index() as usize] += 1;
+                let b = p.bounds();
+                assert!(lo.cmple(b.min).all() && b.max.cmple(hi).all());
+            }
+        }
+        assert!(seen.iter().all(|&s| s == 1));
+    }
+}
