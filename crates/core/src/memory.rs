@@ -51,7 +51,9 @@ pub const CPU_PREPARE_BYTES_PER_TRIANGLE: u64 = 200;
 /// (The world-space copy of each mesh's vertex and index arrays is counted exactly, from the
 /// scene's meshes.)
 /// The capsule per point: the sphere BVH (centres, indices, nodes), its build's temporaries and
-/// the projected path's bins. Measured 82 on the 1M-point tree scan.
+/// the projected path's bins. Measured 82 on the 1M-point tree scan; about 112 since the sphere
+/// BVH is built by the BVH core (32-byte box primitives and a boxed binary tree: the process's
+/// peak on `scenes/tree-merge.toml` rose by 31 MB).
 pub const CPU_PREPARE_BYTES_PER_POINT: u64 = 128;
 /// The GPU backend per triangle: its upload's host-side arrays and the device buffers (on a
 /// software adapter those are host memory too). Measured 38 on lavapipe (8.4M-triangle sphere).
