@@ -9,7 +9,7 @@
 //!   (the [`crate::bvh_core`] node the triangle BVH uses too: 128 B per node, about one node per
 //!   6 spheres). Centres are stored in leaf order as three
 //!   per-axis arrays (12 B/sphere) with their original index (4 B/sphere). [`SphereBvh::bytes`]
-//!   reports the total (about 34 B per sphere).
+//!   reports the total (about 37 B per sphere).
 //! - **Trace**: the core's ordered depth-first traversal ([`crate::bvh_core::closest_walk`]):
 //!   the four children's slab tests in one SIMD pass, the nearest entered child next, the others
 //!   on a stack with their entry distances (skipped when a closer hit has been found). A leaf's ≤ 4 spheres are tested at once with the exact
