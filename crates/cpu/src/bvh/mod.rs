@@ -515,7 +515,6 @@ mod tests {
         let p = PreparedScene::new(&scene);
         let corners: Vec<[Vec3; 3]> = p.triangles.iter().map(|t| p.triangle(*t)).collect();
         let prims: Vec<Prim> = corners.iter().enumerate().map(|(i, c)| triangle_prim(i as u32, *c)).collect();
-        let order: Vec<u32> = (0..150).collect();
         let mut packer = Packer { prims: &prims, packs: Vec::new(), leaves: 0 };
         let mut nodes = Vec::new();
         // 150 triangles = 38 packs: one extra node over four leaves of ≤ 16 packs.
@@ -531,7 +530,7 @@ mod tests {
             for &(first, n) in &packer.packs[packs] {
                 assert!((1..=4).contains(&n));
                 for pos in first..first + n {
-                    let t = order[pos as usize];
+                    let t = prims[pos as usize].index();
                     seen[t as usize] += 1;
                     // The child box holds the triangle.
                     for v in corners[t as usize] {

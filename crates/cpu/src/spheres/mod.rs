@@ -7,14 +7,15 @@
 //! - **Layout** (memory): the binary tree is collapsed into 4-wide nodes (each opens the child
 //!   of largest area until it has four), holding their children's boxes as structure of arrays
 //!   (the [`crate::bvh_core`] node the triangle BVH uses too: 128 B per node, about one node per
-//!   6 spheres). Centres are stored in leaf order as three
-//!   per-axis arrays (12 B/sphere) with their original index (4 B/sphere). [`SphereBvh::bytes`]
-//!   reports the total (about 37 B per sphere).
+//!   6 spheres). Centres are stored in leaf order as three per-axis arrays (12 B/sphere) with
+//!   their original index (4 B/sphere). [`SphereBvh::bytes`] reports the total (about 37 B per
+//!   sphere).
 //! - **Trace**: the core's ordered depth-first traversal ([`crate::bvh_core::closest_walk`]):
 //!   the four children's slab tests in one SIMD pass, the nearest entered child next, the others
-//!   on a stack with their entry distances (skipped when a closer hit has been found). A leaf's ≤ 4 spheres are tested at once with the exact
-//!   ray–sphere test in the perpendicular-distance form (KNOWN-GOOD gotcha 13), lane by lane the
-//!   same operations in the same order as the scalar [`ray_sphere`], so bit for bit its results:
+//!   on a stack with their entry distances (skipped when a closer hit has been found). A leaf's
+//!   ≤ 4 spheres are tested at once with the exact ray–sphere test in the perpendicular-distance
+//!   form (KNOWN-GOOD gotcha 13), lane by lane the same operations in the same order as the
+//!   scalar [`ray_sphere`], so bit for bit its results:
 //!   project the centre on the ray and compare the squared distance of the centre from the ray
 //!   with r². Ties in t go to the lower index, so
 //!   the result equals brute force whatever the traversal order. Rays with `t_min ≥ 0` use a
