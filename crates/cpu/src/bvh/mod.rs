@@ -4,7 +4,7 @@
 //! nodes are binned in parallel, and the upper levels split in parallel with `rayon::join`),
 //! collapsed into a 4-wide BVH whose four child boxes are tested at once with 4-lane SIMD (glam
 //! `Vec4`), as Embree's BVH4 does. The node layout, leaf references and the ordered closest-hit
-//! walk are [`crate::bvh_core`]'s, shared with the sphere BVH. Traversal is tuned for the two ray
+//! walk are `bvh_core`'s, shared with the sphere BVH. Traversal is tuned for the two ray
 //! kinds of paper 1:
 //! - `closest_hit`: ordered traversal (hit children sorted by entry distance, nearest first);
 //!   stacked entries farther than the closest hit so far are skipped; the hit is the least

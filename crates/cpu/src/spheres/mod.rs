@@ -1,16 +1,16 @@
 //! A BVH over millions of equal-radius spheres (the RT-scene's point cloud, design §5).
 //!
-//! - **Build**: the [`crate::bvh_core`] binned SAH the triangle BVH uses too, over the spheres'
+//! - **Build**: the `bvh_core` binned SAH the triangle BVH uses too, over the spheres'
 //!   boxes (16 bins along the centres' widest axis, leaves of at most four spheres; see
 //!   `build::SPHERE_RULES`). The top of the tree is built in parallel with `rayon::join`, and the
 //!   result does not depend on the thread count or timing (deterministic).
 //! - **Layout** (memory): the binary tree is collapsed into 4-wide nodes (each opens the child
 //!   of largest area until it has four), holding their children's boxes as structure of arrays
-//!   (the [`crate::bvh_core`] node the triangle BVH uses too: 128 B per node, about one node per
+//!   (the `bvh_core` node the triangle BVH uses too: 128 B per node, about one node per
 //!   6 spheres). Centres are stored in leaf order as three per-axis arrays (12 B/sphere) with
 //!   their original index (4 B/sphere). [`SphereBvh::bytes`] reports the total (about 37 B per
 //!   sphere).
-//! - **Trace**: the core's ordered depth-first traversal ([`crate::bvh_core::closest_walk`]):
+//! - **Trace**: the core's ordered depth-first traversal (`bvh_core::closest_walk`):
 //!   the four children's slab tests in one SIMD pass, the nearest entered child next, the others
 //!   on a stack with their entry distances (skipped when a closer hit has been found). A leaf's
 //!   ≤ 4 spheres are tested at once with the exact ray–sphere test in the perpendicular-distance
