@@ -126,6 +126,8 @@ fn tiny_bench_of_the_demo_writes_every_output() {
         "churn",
         "flip",
         "fallback_ms",
+        "shadow_map_renders",
+        "probe_renders",
     ] {
         col(&header, c);
     }

@@ -109,16 +109,26 @@ pub struct ShadowView {
     /// Cascades: the camera view distance up to which this cascade is used (the last one covers
     /// everything); ∞ for the other kinds.
     pub split_far: f32,
+    /// Cascades: the far distance and grid cell it was fitted with (`cascades`, to keep it).
+    pub cascade: Option<CascadeFit>,
+}
+
+/// Where a cascade's map was fitted: the cascades' far distance and the cell of the grid its
+/// centre was snapped to (in steps of a quarter of its slice's radius, in the light's plane).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CascadeFit {
+    pub far: f32,
+    pub cell: [i32; 2],
 }
 
 impl ShadowView {
-    fn new(camera: &Camera, size: u32, split_far: f32) -> Self {
+    fn new(camera: &Camera, size: u32, split_far: f32, cascade: Option<CascadeFit>) -> Self {
         let (near, far) = camera.near_far();
         let (orthographic, texel_world) = match camera.projection {
             Projection::Orthographic { height, .. } => (true, height / size as f32),
             Projection::Perspective { fov_y_deg, .. } => (false, 2.0 * (fov_y_deg.to_radians() * 0.5).tan() / size as f32),
         };
-        Self { view_proj: camera.view_projection(1.0), size, orthographic, near, far, texel_world, split_far }
+        Self { view_proj: camera.view_projection(1.0), size, orthographic, near, far, texel_world, split_far, cascade }
     }
 
     /// Distance along the view axis for reversed-Z depth `z` of this view.
@@ -235,9 +245,17 @@ fn perspective_range(from: Vec3, bounds: &Aabb) -> (f32, f32) {
 
 /// The views of every shadow-casting light for a frame seen by `camera` at `aspect`. Spot and
 /// point views depend only on the light and the scene; directional cascades also on the camera
-/// (fitted to slices of its view, their centres snapped to a grid of a quarter of their radius
-/// so they move, and must be re-rendered, only when the view has moved that far).
-pub fn plan_light_views(scene: &Scene, bounds: &Aabb, camera: &Camera, aspect: f32, settings: &FallbackSettings) -> Vec<LightViews> {
+/// (see [`cascades`]). `previous(light, k)` is the view light `light`'s map `k` was last
+/// rendered with, if any: a cascade keeps it while it still covers its slice of the view, so
+/// along a camera path the cascades are re-rendered only now and then, not every frame.
+pub fn plan_light_views(
+    scene: &Scene,
+    bounds: &Aabb,
+    camera: &Camera,
+    aspect: f32,
+    settings: &FallbackSettings,
+    previous: &dyn Fn(usize, usize) -> Option<ShadowView>,
+) -> Vec<LightViews> {
     let mut out = Vec::new();
     if bounds.is_empty() {
         return out;
@@ -247,7 +265,9 @@ pub fn plan_light_views(scene: &Scene, bounds: &Aabb, camera: &Camera, aspect: f
             continue;
         }
         let (kind, views) = match light {
-            Light::Directional(l) => (ShadowKind::Directional, cascades(l.direction, bounds, camera, aspect, settings)),
+            Light::Directional(l) => {
+                (ShadowKind::Directional, cascades(l.direction, bounds, camera, aspect, settings, &|c| previous(k, c)))
+            }
             Light::Spot(l) => {
                 let (near, far) = perspective_range(l.position, bounds);
                 let fov = (2.0 * l.outer_angle.to_degrees() + 2.0).clamp(1.0, 170.0);
@@ -257,12 +277,12 @@ pub fn plan_light_views(scene: &Scene, bounds: &Aabb, camera: &Camera, aspect: f
                     up: up_for(l.direction),
                     projection: Projection::Perspective { fov_y_deg: fov, near, far },
                 };
-                (ShadowKind::Spot, vec![ShadowView::new(&cam, settings.shadow_map_size, f32::INFINITY)])
+                (ShadowKind::Spot, vec![ShadowView::new(&cam, settings.shadow_map_size, f32::INFINITY, None)])
             }
             Light::Point(l) => {
                 let (near, far) = perspective_range(l.position, bounds);
                 let views = (0..6)
-                    .map(|f| ShadowView::new(&cube_face_camera(l.position, f, near, far), settings.cube_shadow_size, f32::INFINITY))
+                    .map(|f| ShadowView::new(&cube_face_camera(l.position, f, near, far), settings.cube_shadow_size, f32::INFINITY, None))
                     .collect();
                 (ShadowKind::Point, views)
             }
@@ -288,61 +308,97 @@ pub fn cascade_splits(near: f32, far: f32, count: u32) -> Vec<f32> {
         .collect()
 }
 
-fn cascades(direction: Vec3, bounds: &Aabb, camera: &Camera, aspect: f32, settings: &FallbackSettings) -> Vec<ShadowView> {
+/// The cascades' farthest distance is rounded up to one of these steps per doubling, so that
+/// it stays the same while the view's reach changes a little (a new far distance moves every
+/// split and re-renders every cascade).
+pub const CASCADE_FAR_STEPS_PER_OCTAVE: f32 = 4.0;
+
+/// A directional light's cascades for `camera`: the view, up to the farthest scene point in front
+/// of it, split into `settings.cascades` slices (the practical split), each covered by an
+/// orthographic map around the slice's bounding sphere.
+///
+/// What makes them re-render rarely along a camera path:
+/// - the far distance is rounded up to a step of [`CASCADE_FAR_STEPS_PER_OCTAVE`] (and the last
+///   frame's, one step further, is kept), so the splits and the spheres' radii stay fixed;
+/// - a slice's sphere depends only on the slice, not on the camera's rotation, and its centre is
+///   snapped to a grid of a quarter of its radius, the map grown by √2 grid steps;
+/// - a map from `previous` is kept while the slice's sphere still lies inside it, i.e. until its
+///   centre has moved √2 grid steps from the map's: where a freshly snapped map would move every
+///   time the centre crosses a grid line.
+fn cascades(
+    direction: Vec3,
+    bounds: &Aabb,
+    camera: &Camera,
+    aspect: f32,
+    settings: &FallbackSettings,
+    previous: &dyn Fn(usize) -> Option<ShadowView>,
+) -> Vec<ShadowView> {
     let dir = direction.normalize_or(Vec3::NEG_Y);
     let forward = camera.forward();
     let (cam_near, cam_far) = camera.near_far();
     // Shadows are needed up to the farthest scene point in front of the camera.
     let reach = corners(bounds).iter().map(|c| (*c - camera.position).dot(forward)).fold(0.0f32, f32::max);
-    let far = reach.min(cam_far).max(cam_near * 2.0);
+    let needed_far = reach.min(cam_far).max(cam_near * 2.0);
+    let far_of_step = |step: f32| 2f32.powf(step / CASCADE_FAR_STEPS_PER_OCTAVE).min(cam_far).max(cam_near * 2.0);
+    let far_step = (needed_far.log2() * CASCADE_FAR_STEPS_PER_OCTAVE).ceil();
+    let kept_far = previous(0).and_then(|v| v.cascade).map(|c| c.far);
+    let far = if kept_far == Some(far_of_step(far_step + 1.0)) { far_of_step(far_step + 1.0) } else { far_of_step(far_step) };
     let near = cam_near.max(far * 1e-4);
     // Light basis, as look_at_rh builds it.
     let up = up_for(dir);
     let s = dir.cross(up).normalize();
     let u = s.cross(dir);
-    let right = camera.up.cross(-forward).normalize_or(Vec3::X);
-    let cam_up = (-forward).cross(right);
     // Scene extent along the light: every caster lies between these.
     let along: Vec<f32> = corners(bounds).iter().map(|c| c.dot(dir)).collect();
     let (d_min, d_max) = along.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
     let margin = (d_max - d_min) * 0.01 + 1e-3;
+    // Half width and height of the view at distance d.
+    let half = |d: f32| match camera.projection {
+        Projection::Perspective { fov_y_deg, .. } => {
+            let t = (fov_y_deg.to_radians() * 0.5).tan() * d;
+            (t * aspect, t)
+        }
+        Projection::Orthographic { height, .. } => (height * 0.5 * aspect, height * 0.5),
+    };
     let mut start = near;
     cascade_splits(near, far, settings.cascades)
         .into_iter()
-        .map(|end| {
-            // The slice's eight corners and their bounding sphere (its radius depends only on
-            // the slice, not on the view's rotation).
-            let half = |d: f32| match camera.projection {
-                Projection::Perspective { fov_y_deg, .. } => {
-                    let t = (fov_y_deg.to_radians() * 0.5).tan() * d;
-                    (t * aspect, t)
-                }
-                Projection::Orthographic { height, .. } => (height * 0.5 * aspect, height * 0.5),
-            };
-            let mut pts = [Vec3::ZERO; 8];
-            for (i, p) in pts.iter_mut().enumerate() {
-                let d = if i < 4 { start } else { end };
+        .enumerate()
+        .map(|(k, end)| {
+            // The slice's bounding sphere, in the camera's frame: centred on the view axis
+            // halfway through the slice, through its farthest corner. Its radius depends only on
+            // the slice (bit for bit, whatever the camera's pose).
+            let mid = 0.5 * (start + end);
+            let corner_distance = |d: f32| {
                 let (hx, hy) = half(d);
-                let sx = if i & 1 == 0 { -hx } else { hx };
-                let sy = if i & 2 == 0 { -hy } else { hy };
-                *p = camera.position + forward * d + right * sx + cam_up * sy;
-            }
-            let centre = pts.iter().copied().sum::<Vec3>() / 8.0;
-            let radius = pts.iter().map(|p| p.distance(centre)).fold(0.0f32, f32::max).max(1e-3);
-            // Snap the centre (in the light's plane) to a grid of radius/4, and grow the
-            // radius by the snap so the slice stays inside.
+                (hx * hx + hy * hy + (d - mid) * (d - mid)).sqrt()
+            };
+            let radius = corner_distance(start).max(corner_distance(end)).max(1e-3);
+            let centre = camera.position + forward * mid;
+            let (x, y) = (centre.dot(s), centre.dot(u));
             let step = radius * 0.25;
-            let (cx, cy) = ((centre.dot(s) / step).round() * step, (centre.dot(u) / step).round() * step);
-            let r = radius + step * std::f32::consts::SQRT_2;
-            let eye = s * cx + u * cy + dir * (d_min - margin);
-            let cam = Camera {
-                position: eye,
-                target: eye + dir,
-                up,
-                projection: Projection::Orthographic { height: 2.0 * r, near: 0.0, far: d_max - d_min + 2.0 * margin },
+            let slack = step * std::f32::consts::SQRT_2;
+            let view_at = |cell: [i32; 2]| {
+                let r = radius + slack;
+                let eye = s * (cell[0] as f32 * step) + u * (cell[1] as f32 * step) + dir * (d_min - margin);
+                let cam = Camera {
+                    position: eye,
+                    target: eye + dir,
+                    up,
+                    projection: Projection::Orthographic { height: 2.0 * r, near: 0.0, far: d_max - d_min + 2.0 * margin },
+                };
+                ShadowView::new(&cam, settings.shadow_map_size, end, Some(CascadeFit { far, cell }))
             };
             start = end;
-            ShadowView::new(&cam, settings.shadow_map_size, end)
+            // Last frame's map, while the sphere still lies inside it (and nothing else changed).
+            let kept = previous(k).filter(|v| {
+                v.cascade.is_some_and(|c| {
+                    let inside =
+                        (x - c.cell[0] as f32 * step).abs() <= slack * 0.999 && (y - c.cell[1] as f32 * step).abs() <= slack * 0.999;
+                    c.far == far && inside && view_at(c.cell) == *v
+                })
+            });
+            kept.unwrap_or_else(|| view_at([(x / step).round() as i32, (y / step).round() as i32]))
         })
         .collect()
 }
@@ -1247,6 +1303,7 @@ mod tests {
                 far: 50.0,
                 texel_world: 0.1,
                 split_far: 1.0,
+                cascade: None,
             };
             for d in [0.1f32, 0.5, 3.0, 20.0, 49.0] {
                 let z = v.depth_of(d);
@@ -1261,6 +1318,66 @@ mod tests {
         // near 1, far 100, 2 cascades: t = 0.5: log 10, uniform 50.5 → 30.25; t = 1: 100.
         let s = cascade_splits(1.0, 100.0, 2);
         assert!((s[0] - 30.25).abs() < 1e-4 && (s[1] - 100.0).abs() < 1e-3, "{s:?}");
+    }
+
+    /// A camera walking and turning through a room-sized scene under a sun, frame after frame
+    /// with last frame's views as `previous`: every cascade's map covers its whole slice of the
+    /// view on every frame (kept or not), the last reaches the farthest scene point in front,
+    /// and the maps are re-planned far less often than once per cascade per frame.
+    #[test]
+    fn cascades_are_kept_while_they_cover_their_slice() {
+        let scene = hybrid_scene::demo_scene();
+        let bounds = Aabb { min: Vec3::new(-12.0, -1.0, -12.0), max: Vec3::new(12.0, 8.0, 12.0) };
+        let settings = FallbackSettings { cascades: 3, ..FallbackSettings::default() };
+        let aspect = 16.0 / 9.0;
+        let views_of = |camera: &Camera, previous: &[ShadowView]| {
+            let lv = plan_light_views(&scene, &bounds, camera, aspect, &settings, &|light, k| {
+                (light == 0).then(|| previous.get(k).copied()).flatten()
+            });
+            assert_eq!(lv[0].kind, ShadowKind::Directional, "the demo's first light is its sun");
+            lv[0].views.clone()
+        };
+        let frames = 240;
+        let mut previous: Vec<ShadowView> = Vec::new();
+        let mut changed = 0;
+        for f in 0..frames {
+            // A sideways walk of 10 cm a frame (3 m/s at 30 frames per second) looking along −z,
+            // which keeps the view's reach and so its splits the same: only the slices' moving
+            // out of their maps re-plans them; then a turn on the spot, 0.5° a frame.
+            let t = f.min(frames / 2) as f32;
+            let position = Vec3::new(-6.0 + 0.1 * t, 1.7, 3.0);
+            let yaw = (0.5 * (f - f.min(frames / 2)) as f32).to_radians();
+            let camera = Camera { position, target: position + Vec3::new(yaw.sin(), -0.1, -yaw.cos()), ..scene.camera };
+            let views = views_of(&camera, &previous);
+            assert_eq!(views.len(), 3);
+            if f == 0 {
+                assert_eq!(views, views_of(&camera, &[]), "the first frame is planned afresh");
+            }
+            changed += views.iter().zip(&previous).filter(|(a, b)| a != b).count();
+            // Each slice's eight corners lie inside its map.
+            let forward = camera.forward();
+            let right = camera.up.cross(-forward).normalize();
+            let cam_up = (-forward).cross(right);
+            let Projection::Perspective { fov_y_deg, near, .. } = camera.projection else { unreachable!() };
+            let tan = (fov_y_deg.to_radians() * 0.5).tan();
+            let mut start = near;
+            for (k, v) in views.iter().enumerate() {
+                for i in 0..8 {
+                    let d = if i < 4 { start } else { v.split_far };
+                    let sx = if i & 1 == 0 { -tan * d * aspect } else { tan * d * aspect };
+                    let sy = if i & 2 == 0 { -tan * d } else { tan * d };
+                    let p = camera.position + forward * d + right * sx + cam_up * sy;
+                    let (uv, _) = project(&v.view_proj, p).unwrap();
+                    assert!(uv.min_element() >= 0.0 && uv.max_element() <= 1.0, "frame {f}, cascade {k}: corner {i} at {uv}");
+                }
+                start = v.split_far;
+            }
+            let reach = corners(&bounds).iter().map(|c| (*c - camera.position).dot(forward)).fold(0.0f32, f32::max);
+            assert!(views[2].split_far >= reach * 0.999, "frame {f}: the last split {} < reach {reach}", views[2].split_far);
+            previous = views;
+        }
+        eprintln!("cascade maps re-planned: {changed} of {} cascade-frames", 3 * (frames - 1));
+        assert!(changed * 10 < 3 * (frames - 1), "{changed} re-planned maps in {frames} frames");
     }
 
     #[test]
@@ -1311,7 +1428,7 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(18);
         let maps: Vec<Option<LightShadowMaps>> = {
             let mut maps = vec![None; lights(&scene.lights).count()];
-            for lv in plan_light_views(&scene, &bounds, &camera, 16.0 / 9.0, &settings) {
+            for lv in plan_light_views(&scene, &bounds, &camera, 16.0 / 9.0, &settings, &|_, _| None) {
                 let maps_of_light = lv
                     .views
                     .iter()
@@ -1394,8 +1511,16 @@ mod tests {
     #[test]
     fn bilinear_comparison_by_hand() {
         // 2×2 map: left column depth 0.8 (an occluder near the light), right column 0.2.
-        let view =
-            ShadowView { view_proj: Mat4::IDENTITY, size: 2, orthographic: true, near: 0.0, far: 1.0, texel_world: 0.5, split_far: 1.0 };
+        let view = ShadowView {
+            view_proj: Mat4::IDENTITY,
+            size: 2,
+            orthographic: true,
+            near: 0.0,
+            far: 1.0,
+            texel_world: 0.5,
+            split_far: 1.0,
+            cascade: None,
+        };
         let map = ShadowMap { view, depth: vec![0.8, 0.2, 0.8, 0.2] };
         // A receiver at depth 0.5: lit by the right texels only. Half-way between the texel
         // centres (u = 0.5) the weights are ½ each.

@@ -133,7 +133,8 @@ impl FallbackCache {
         // Shadow maps: re-rendered where the view changed (cascades when the camera moved them).
         let aspect = gbuffer.width as f32 / gbuffer.height.max(1) as f32;
         let spheres = if capsule.is_some() { &scene.point_clouds[..] } else { &[] };
-        for lv in plan_light_views(scene, &self.bounds, camera, aspect, &self.settings) {
+        let previous = |light: usize, k: usize| self.maps[light].as_ref().and_then(|m| m.maps.get(k)).map(|m| m.view);
+        for lv in plan_light_views(scene, &self.bounds, camera, aspect, &self.settings, &previous) {
             // Last frame's maps, moved (not copied) into this frame's where the view is the same.
             let mut old: Vec<Option<ShadowMap>> =
                 self.maps[lv.light].take().map_or_else(Vec::new, |o| o.maps.into_iter().map(Some).collect());

@@ -539,7 +539,9 @@ impl FallbackGpu {
     pub fn update_views(&mut self, ctx: &GpuContext, scene: &Scene, camera: &Camera, aspect: f32) -> Vec<u32> {
         let mut to_render = Vec::new();
         let mut lights_data = vec![GpuShadowLight::default(); self.slots.len().max(1)];
-        for lv in plan_light_views(scene, &self.bounds, camera, aspect, &self.settings) {
+        let slots = &self.slots;
+        let previous = |light: usize, k: usize| slots.get(light)?.as_ref()?.rendered.get(k).copied().flatten();
+        for lv in plan_light_views(scene, &self.bounds, camera, aspect, &self.settings, &previous) {
             let Some(slot) = self.slots.get_mut(lv.light).and_then(Option::as_mut) else { continue };
             if slot.kind != lv.kind || lv.views.len() != slot.places.len() {
                 // Cannot happen (the layers were counted from the same lights and settings); a

@@ -25,7 +25,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use hybrid_core::fallback::Fallback;
-use hybrid_core::report::{FrameReport, StageTimings};
+use hybrid_core::report::{FallbackRenders, FrameReport, StageTimings};
 use hybrid_core::{FrameSettings, Mode};
 use hybrid_scene::{Budget, Camera, Policy, Scene, load_scene_or_model_within};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -360,6 +360,7 @@ mod tests {
             selected: Some(selected),
             churn: Some(churn),
             flip: None,
+            fallback_renders: Default::default(),
         }
     }
 

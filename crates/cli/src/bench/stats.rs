@@ -21,6 +21,8 @@ pub(super) struct FrameRecord {
     pub(super) selected: Option<usize>,
     pub(super) churn: Option<usize>,
     pub(super) flip: Option<f32>,
+    /// Shadow maps and probes the fallback stage rendered in this frame (0 when cached).
+    pub(super) fallback_renders: FallbackRenders,
 }
 
 impl FrameRecord {
@@ -40,6 +42,7 @@ impl FrameRecord {
             selected: h.map(|h| h.objects.iter().filter(|o| o.selected).count()),
             churn: h.map(|h| h.objects.iter().filter(|o| o.s != o.selected).count()),
             flip: None,
+            fallback_renders: report.fallback_renders,
         }
     }
 }
