@@ -148,7 +148,12 @@ fn tiny_bench_of_the_demo_writes_every_output() {
         col(&sh, c);
     }
     assert_eq!(srows.len(), 20);
-    col(&sh, "fallback");
+    let (fb, fb_ms) = (col(&sh, "fallback"), col(&sh, "mean_fallback_ms"));
+    for r in &srows {
+        let ms: f64 = r[fb_ms].parse().unwrap();
+        // `none` runs no fallback stage: only its timer's own microsecond.
+        assert!(if r[fb] == "none" { ms < 0.05 } else { ms >= 0.0 }, "{r:?}");
+    }
 
     for png in ["frame_times.png", "sweep.png"] {
         let img = image::open(out.join(png)).unwrap();

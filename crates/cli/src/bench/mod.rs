@@ -184,6 +184,7 @@ pub fn run(args: BenchArgs) -> Result<(), CliError> {
                         mean_frame_ms: frame.mean,
                         p95_frame_ms: frame.p95,
                         mean_trace_ms: mean(recs.iter().map(|r| r.timings.trace)).unwrap_or(0.0),
+                        mean_fallback_ms: mean(recs.iter().map(|r| r.timings.fallback)).unwrap_or(0.0),
                         mean_flip: mean(recs.iter().filter_map(|r| r.flip.map(f64::from))),
                         mean_churn: mean(recs.iter().filter_map(|r| r.churn.map(|c| c as f64))),
                     });

@@ -82,7 +82,8 @@ pub(super) fn frames_csv<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> 
     s
 }
 
-pub const SWEEP_CSV_HEADER: &str = "policy,fraction,budget,frames,mean_frame_ms,p95_frame_ms,mean_trace_ms,mean_flip,mean_churn,fallback";
+pub const SWEEP_CSV_HEADER: &str =
+    "policy,fraction,budget,frames,mean_frame_ms,p95_frame_ms,mean_trace_ms,mean_flip,mean_churn,fallback,mean_fallback_ms";
 
 pub(super) fn sweep_csv(points: &[SweepPoint]) -> String {
     let mut s = String::from(SWEEP_CSV_HEADER);
@@ -90,7 +91,7 @@ pub(super) fn sweep_csv(points: &[SweepPoint]) -> String {
     for p in points {
         let _ = writeln!(
             s,
-            "{},{},{:.1},{},{:.3},{:.3},{:.3},{},{},{}",
+            "{},{},{:.1},{},{:.3},{:.3},{:.3},{},{},{},{:.3}",
             p.policy,
             p.fraction,
             p.budget,
@@ -100,7 +101,8 @@ pub(super) fn sweep_csv(points: &[SweepPoint]) -> String {
             p.mean_trace_ms,
             opt(p.mean_flip.map(|f| format!("{f:.5}"))),
             opt(p.mean_churn.map(|c| format!("{c:.3}"))),
-            p.fallback
+            p.fallback,
+            p.mean_fallback_ms
         );
     }
     s

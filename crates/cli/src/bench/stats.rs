@@ -155,6 +155,8 @@ pub(super) struct SweepPoint {
     pub(super) mean_frame_ms: f64,
     pub(super) p95_frame_ms: f64,
     pub(super) mean_trace_ms: f64,
+    /// Mean of the fallback stage (shadow maps, probes, lookups); 0 with `--fallback none`.
+    pub(super) mean_fallback_ms: f64,
     pub(super) mean_flip: Option<f64>,
     pub(super) mean_churn: Option<f64>,
 }
