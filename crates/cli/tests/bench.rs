@@ -128,6 +128,7 @@ fn tiny_bench_of_the_demo_writes_every_output() {
         "fallback_ms",
         "shadow_map_renders",
         "probe_renders",
+        "see_through_renders",
     ] {
         col(&header, c);
     }

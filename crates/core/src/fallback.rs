@@ -1010,6 +1010,39 @@ pub fn see_through_view(camera: &Camera, width: u32, height: u32) -> (Camera, u3
     (Camera { projection, ..*camera }, size(width), size(height))
 }
 
+/// How far the view may turn from the see-through layer's, and move as seen from the nearest
+/// see-through object that needs the layer, before the layer is rendered again (degrees). The
+/// layer is a depth image of the scene, and its lookups intersect the refracted rays with its
+/// surfaces, so a layer from a nearby viewpoint gives the same hits wherever the new viewpoint
+/// sees the same surfaces. Larger values re-render the layer less often along a camera path at
+/// the cost of refractions that miss what only the new viewpoint sees (and of guard band, which
+/// turning uses up: 1.5× is about 9° on a 45° view).
+pub const SEE_THROUGH_KEEP_DEGREES: f32 = 2.0;
+
+/// Whether a see-through layer rendered with camera `layer` at `layer_size` can serve a frame
+/// whose own layer would be `view` at `view_size` ([`see_through_view`]): the same size,
+/// projection and up vector; the view direction turned at most [`SEE_THROUGH_KEEP_DEGREES`];
+/// the eye moved at most that angle as seen from `nearest` away (the distance to the nearest
+/// see-through object that needs the layer, [`nearest_see_through`]).
+pub fn see_through_layer_kept(layer: &Camera, layer_size: (u32, u32), view: &Camera, view_size: (u32, u32), nearest: f32) -> bool {
+    if layer_size != view_size || layer.projection != view.projection || layer.up != view.up {
+        return false;
+    }
+    let angle = SEE_THROUGH_KEEP_DEGREES.to_radians();
+    layer.forward().dot(view.forward()) >= angle.cos() && layer.position.distance(view.position) <= nearest * angle.tan()
+}
+
+/// Distance from `eye` to the nearest object's box among those that are see-through and
+/// `needed` (0 from inside one; ∞ when there is none).
+pub fn nearest_see_through(eye: Vec3, object_bounds: &[Aabb], see_through: &[bool], needed: &[bool]) -> f32 {
+    object_bounds
+        .iter()
+        .zip(see_through.iter().zip(needed))
+        .filter(|(b, (s, n))| **s && **n && !b.is_empty())
+        .map(|(b, _)| (b.min - eye).max(eye - b.max).max(Vec3::ZERO).length())
+        .fold(f32::INFINITY, f32::min)
+}
+
 /// The see-through layer: the frame's view, widened ([`see_through_view`]), rendered with the
 /// raster path without the see-through objects ([`see_through_objects`]), lit. Such an
 /// object's refraction ray from `p` along `t` is intersected with the layer's surfaces (each
@@ -1378,6 +1411,42 @@ mod tests {
         }
         eprintln!("cascade maps re-planned: {changed} of {} cascade-frames", 3 * (frames - 1));
         assert!(changed * 10 < 3 * (frames - 1), "{changed} re-planned maps in {frames} frames");
+    }
+
+    /// The keep rule by hand: 2° of turn, and 2° of move as seen from the nearest see-through
+    /// object's box.
+    #[test]
+    fn see_through_layer_is_kept_within_two_degrees() {
+        let layer = Camera {
+            position: Vec3::new(0.0, 1.0, 5.0),
+            target: Vec3::new(0.0, 1.0, 0.0),
+            up: Vec3::Y,
+            projection: Projection::Perspective { fov_y_deg: 45.0, near: 0.1, far: 100.0 },
+        };
+        let size = (96, 54);
+        let turned = |deg: f32| {
+            let a = deg.to_radians();
+            Camera { target: layer.position + Vec3::new(a.sin(), 0.0, -a.cos()), ..layer }
+        };
+        assert!(see_through_layer_kept(&layer, size, &layer, size, 0.0), "the same view, even from inside an object");
+        assert!(see_through_layer_kept(&layer, size, &turned(1.9), size, 1.0));
+        assert!(!see_through_layer_kept(&layer, size, &turned(2.1), size, 1.0));
+        // From 4 away, 2° is a move of 4 tan 2° = 0.1397.
+        let moved =
+            |d: f32| Camera { position: layer.position + Vec3::new(d, 0.0, 0.0), target: layer.target + Vec3::new(d, 0.0, 0.0), ..layer };
+        assert!(see_through_layer_kept(&layer, size, &moved(0.139), size, 4.0));
+        assert!(!see_through_layer_kept(&layer, size, &moved(0.141), size, 4.0));
+        assert!(!see_through_layer_kept(&layer, size, &layer, (96, 55), 4.0), "another size");
+        let wider = Camera { projection: Projection::Perspective { fov_y_deg: 50.0, near: 0.1, far: 100.0 }, ..layer };
+        assert!(!see_through_layer_kept(&layer, size, &wider, size, 4.0), "another projection");
+        // Box [0, 1]³: from (2, 0.5, 3) the nearest point is (1, 0.5, 1), √5 away.
+        let boxes = [Aabb { min: Vec3::ZERO, max: Vec3::ONE }, Aabb { min: Vec3::splat(10.0), max: Vec3::splat(11.0) }];
+        let d = nearest_see_through(Vec3::new(2.0, 0.5, 3.0), &boxes, &[true, true], &[true, true]);
+        assert!((d - 5f32.sqrt()).abs() < 1e-6, "{d}");
+        assert_eq!(nearest_see_through(Vec3::splat(0.5), &boxes, &[true, true], &[true, true]), 0.0, "inside");
+        let far = nearest_see_through(Vec3::new(2.0, 0.5, 3.0), &boxes, &[true, true], &[false, true]);
+        assert!((far - Vec3::new(8.0, 9.5, 7.0).length()).abs() < 1e-5, "only the needed box: {far}");
+        assert_eq!(nearest_see_through(Vec3::ZERO, &boxes, &[false, false], &[true, true]), f32::INFINITY);
     }
 
     #[test]

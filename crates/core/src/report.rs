@@ -98,6 +98,8 @@ pub struct FrameReport {
 pub struct FallbackRenders {
     pub shadow_maps: u64,
     pub probes: u64,
+    /// See-through layers (0 or 1: the layer is kept while the view stays close to its own).
+    pub see_through: u64,
 }
 
 /// The GPU adapter a frame ran on.

@@ -11,7 +11,8 @@ use glam::Vec3;
 use hybrid_core::blend::MASK_EPSILON;
 use hybrid_core::fallback::{
     FallbackScene, FallbackSettings, LightShadowMaps, Probe, ProbePlan, Refractor, SeeThrough, ShadowMap, ShadowView, caster_meshes,
-    plan_light_views, plan_probes, project, refractors, scene_bounds, see_through_objects, see_through_view, shadowed_lights,
+    nearest_see_through, plan_light_views, plan_probes, project, refractors, scene_bounds, see_through_layer_kept, see_through_objects,
+    see_through_view, shadowed_lights,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::report::FallbackRenders;
@@ -45,7 +46,7 @@ pub struct FallbackCache {
     pub shadow_map_renders: Vec<u64>,
     /// Probes rendered since the cache was made.
     pub probe_renders: u64,
-    /// The last see-through layer, kept while the view stays the same (scenes are static).
+    /// The last see-through layer, kept while the view stays close to it (scenes are static).
     see_through: Option<SeeThroughLayer>,
     /// See-through layers rendered since the cache was made.
     pub see_through_renders: u64,
@@ -155,13 +156,18 @@ impl FallbackCache {
         }
 
         // The see-through layer, when a planar or convex refractive object has untraced pixels:
-        // the view rasterized without those objects, lit; kept while the view stays the same.
-        // Its texels are shaded with their probes, so what shows in it needs probes as well.
+        // the view rasterized without those objects, lit; kept while the view stays close to
+        // the layer's (`see_through_layer_kept`). Its texels are shaded with their probes, so
+        // what shows in it needs probes as well.
         let see_through_needed = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
         if see_through_needed {
             let (view, w, h) = see_through_view(camera, gbuffer.width, gbuffer.height);
-            let same = self.see_through.as_ref().is_some_and(|l| l.view == view && (l.gbuffer.width, l.gbuffer.height) == (w, h));
-            if !same {
+            let nearest = nearest_see_through(camera.position, &prepared.object_bounds, &self.see_through_objects, &needed);
+            let kept = self
+                .see_through
+                .as_ref()
+                .is_some_and(|l| see_through_layer_kept(&l.view, (l.gbuffer.width, l.gbuffer.height), &view, (w, h), nearest));
+            if !kept {
                 let g = raster::rasterize_meshes(prepared, &view, w, h, &self.see_through_meshes);
                 let lit = lighting::deferred_lighting(&g, scene, &view);
                 // What it shows gets its probe below; a kept layer's objects got theirs when it
@@ -173,6 +179,7 @@ impl FallbackCache {
                 }
                 self.see_through = Some(SeeThroughLayer { view, gbuffer: g, lit });
                 self.see_through_renders += 1;
+                renders.see_through += 1;
             }
         }
         let layer = self.see_through.as_ref().filter(|_| see_through_needed);

@@ -393,7 +393,23 @@ intensity = 1.0
     let again = render(&mut r, &scene.camera, Mode::Raster, w, h);
     assert_eq!(renders(&r), 1);
     assert_eq!(again.buffers.refraction_fallback, raster.buffers.refraction_fallback);
-    let moved = Camera { position: scene.camera.position + Vec3::new(0.2, 0.0, 0.0), ..scene.camera };
-    render(&mut r, &moved, Mode::Raster, w, h);
+    // ... and while it stays close: moved by 0.9 of what `see_through_layer_kept` allows from
+    // the nearest see-through object, the kept layer
+    // gives nearly the refractions a fresh one does; moved by 1.1 of it, the layer is rendered
+    // again.
+    let see_through = hybrid_core::fallback::see_through_objects(&prepared, &refractors);
+    let needed = vec![true; see_through.len()];
+    let nearest = hybrid_core::fallback::nearest_see_through(scene.camera.position, &prepared.object_bounds, &see_through, &needed);
+    assert!(nearest > 1.0 && nearest < 10.0, "{nearest}");
+    let step = nearest * hybrid_core::fallback::SEE_THROUGH_KEEP_DEGREES.to_radians().tan();
+    let moved = |by: f32| Camera { position: scene.camera.position + Vec3::new(by, 0.0, 0.0), ..scene.camera };
+    let kept = render(&mut r, &moved(0.9 * step), Mode::Raster, w, h);
+    assert_eq!(renders(&r), 1, "kept within {step}");
+    let fresh = render(&mut CpuRenderer::new(&scene).unwrap(), &moved(0.9 * step), Mode::Raster, w, h);
+    assert_ne!(kept.buffers.refraction_fallback, fresh.buffers.refraction_fallback, "the kept layer is not a fresh one");
+    let kept_flip = mean_flip(w, h, &srgb_final(&fresh), &srgb_final(&kept));
+    eprintln!("kept see-through layer vs a fresh one, moved {:.3}: final images mean FLIP {kept_flip:.4}", 0.9 * step);
+    assert!(kept_flip <= 0.01, "{kept_flip}");
+    render(&mut r, &moved(1.1 * step), Mode::Raster, w, h);
     assert_eq!(renders(&r), 2);
 }

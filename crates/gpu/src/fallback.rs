@@ -7,8 +7,8 @@
 //! raster and deferred-lighting passes, six faces per reflective or refractive object, once,
 //! when the object first has untraced pixels. Planar and convex refractive objects refract
 //! through the see-through layer (`SeeThrough`): the frame's view widened, rendered by the same
-//! raster and lighting passes without them into its own targets, every frame one has untraced
-//! pixels, before the probes (the objects it shows get probes: its texels are shaded as the
+//! raster and lighting passes without them into its own targets, when one has untraced pixels
+//! and the view has left the kept layer's 2° (`see_through_layer_kept`), before the probes (the objects it shows get probes: its texels are shaded as the
 //! trace shades a secondary hit, `FallbackScene::through_layer`). A refracted ray is followed out
 //! of a sphere or convex refractor first (`Refractor::leave`; hull planes in one buffer).
 //! Probe faces and that layer sample textures at level 0 (`RasterPass::encode_triangles`). One
@@ -30,8 +30,8 @@ use std::ops::Range;
 use bytemuck::{Pod, Zeroable};
 use hybrid_core::Stage;
 use hybrid_core::fallback::{
-    FallbackSettings, LightShadowMaps, Probe, ProbePlan, Refractor, ShadowKind, ShadowMap, ShadowView, caster_meshes, plan_light_views,
-    plan_probes, refractors, scene_bounds, see_through_objects, see_through_view,
+    FallbackSettings, LightShadowMaps, Probe, ProbePlan, Refractor, ShadowKind, ShadowMap, ShadowView, caster_meshes, nearest_see_through,
+    plan_light_views, plan_probes, refractors, scene_bounds, see_through_layer_kept, see_through_objects, see_through_view,
 };
 use hybrid_core::prepare::PreparedScene;
 use hybrid_core::shading::{Light, lights};
@@ -258,8 +258,13 @@ pub struct FallbackGpu {
     pub shadow_map_renders: Vec<u64>,
     /// Probes rendered since this was made.
     pub probe_renders: u64,
-    /// See-through layers rendered since this was made (one per frame that needed it).
+    /// See-through layers rendered since this was made (kept while the view stays close, as on
+    /// the CPU: `see_through_layer_kept`).
     pub see_through_renders: u64,
+    /// The camera the see-through layer was last rendered with.
+    see_through_view: Option<Camera>,
+    /// Per object: its bounds (`nearest_see_through`).
+    object_bounds: Vec<Aabb>,
 }
 
 impl FallbackGpu {
@@ -501,6 +506,8 @@ impl FallbackGpu {
             outputs: None,
             probe_renders: 0,
             see_through_renders: 0,
+            see_through_view: None,
+            object_bounds: prepared.object_bounds.clone(),
         })
     }
 
@@ -687,8 +694,10 @@ impl FallbackGpu {
     /// (`hybrid_core::fallback::SeeThrough`), when a see-through object is in `needed`
     /// (per object: has untraced pixels): the widened view (`see_through_view`) rasterized
     /// without those objects' meshes (textures at level 0) and lit, in its own submission (the
-    /// frame uniforms hold its camera), every frame it is needed. Its texels are shaded with
-    /// their own probes, so the objects that show in it need probes too, as on the CPU: while
+    /// frame uniforms hold its camera). Its texels are shaded with
+    /// their own probes, so the objects that show in it need probes too, as on the CPU. The
+    /// layer is kept while the view stays close to its own (`see_through_layer_kept`, as on the
+    /// CPU). While
     /// some object's planned probe is not rendered yet, `counter` (the heuristic's count pass,
     /// whose counts the frame has already read) counts the layer's pixels per object id in that
     /// submission, read back (the host waits for the GPU then). Writes the lookups' params (the
@@ -716,6 +725,13 @@ impl FallbackGpu {
             let missing: Vec<bool> = self.plans.iter().zip(&self.probe_rendered).map(|(p, &done)| p.is_some() && !done).collect();
             let count = missing.iter().any(|&m| m);
             let (view, w, h) = see_through_view(camera, width, height);
+            let nearest = nearest_see_through(camera.position, &self.object_bounds, &self.see_through_objects, needed);
+            let layer_size = (self.see_through_targets.width, self.see_through_targets.height);
+            if self.see_through_view.is_some_and(|kept| see_through_layer_kept(&kept, layer_size, &view, (w, h), nearest)) {
+                ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&self.params_data));
+                return Ok(None);
+            }
+            self.see_through_view = Some(view);
             if (self.see_through_targets.width, self.see_through_targets.height) != (w, h) {
                 self.see_through_targets = FrameTargets::raster_layer(&ctx.device, w, h);
             }

@@ -442,8 +442,8 @@ impl<'s> GpuRenderer<'s> {
         let mut probe_ms = 0.0;
         if needed.iter().any(|&x| x) {
             let start = Instant::now();
-            // The see-through layer (planar refractive objects with untraced pixels), every frame,
-            // before the probes: the objects that show in it are shaded with their probes too.
+            // The see-through layer (planar refractive objects with untraced pixels; kept while
+            // the view stays close to its own), before the probes: the objects that show in it are shaded with their probes too.
             let see_through = fb.render_see_through(
                 &self.ctx,
                 &self.gpu_scene,
@@ -455,6 +455,7 @@ impl<'s> GpuRenderer<'s> {
                 (targets.width, targets.height),
                 &needed,
             )?;
+            renders.see_through = u64::from(see_through.is_some());
             for (need, &shown) in needed.iter_mut().zip(see_through.iter().flatten()) {
                 *need |= shown;
             }

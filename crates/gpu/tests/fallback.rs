@@ -204,8 +204,9 @@ fn pavilion_fallbacks_match_the_cpu() {
     assert_fallbacks_match("pavilion", Mode::Hybrid, &c, &g, 0.02);
 }
 
-/// The see-through layer is rendered every frame that needs it (it depends on the view, no
-/// cache), and after the camera moved the GPU's lookups still match the CPU's.
+/// The see-through layer is re-rendered when the view moves beyond `see_through_layer_kept`'s
+/// 2° and kept within it, on both backends alike, and after the camera moved the GPU's lookups
+/// still match the CPU's.
 #[test]
 fn pavilion_see_through_follows_the_camera() {
     let ctx = context();
@@ -214,16 +215,25 @@ fn pavilion_see_through_follows_the_camera() {
     let settings = FrameSettings { width: 96, height: 54, mode: Mode::Raster };
     let mut cpu = CpuRenderer::new(&scene).unwrap();
     let mut gpu = GpuRenderer::new(ctx.clone(), &scene).unwrap_or_else(|e| panic!("{e}"));
-    for k in 0..2 {
-        let offset = Vec3::new(0.4, 0.15, -0.3) * k as f32;
-        let camera = Camera { position: scene.camera.position + offset, ..scene.camera };
+    // Frame 1 moves 0.52 away: a new layer. Frame 2 moves on by 0.9 of what
+    // `see_through_layer_kept` allows from the nearest see-through object: both backends keep
+    // frame 1's layer and still agree.
+    let prepared = PreparedScene::new(&scene);
+    let objects = see_through(&prepared);
+    let at_1 = scene.camera.position + Vec3::new(0.4, 0.15, -0.3);
+    let nearest = hybrid_core::fallback::nearest_see_through(at_1, &prepared.object_bounds, &objects, &vec![true; objects.len()]);
+    let step = 0.9 * nearest * hybrid_core::fallback::SEE_THROUGH_KEEP_DEGREES.to_radians().tan();
+    assert!(step > 0.01, "{step}");
+    for (k, (position, renders)) in [(scene.camera.position, 1), (at_1, 2), (at_1 + Vec3::new(step, 0.0, 0.0), 2)].into_iter().enumerate() {
+        let camera = Camera { position, ..scene.camera };
         let c = cpu.render(&camera, settings, &mut |_| {});
         let g = gpu.render(&camera, settings, &mut |_| {}).unwrap_or_else(|e| panic!("{e}"));
         assert_fallbacks_match(&format!("pavilion frame {k}"), Mode::Raster, &c, &g, 0.02);
         assert_see_through_matches(&format!("pavilion frame {k}"), &scene, &c, &g);
         let fb = gpu.fallback_gpu().expect("the pavilion needs fallbacks");
-        assert_eq!(fb.see_through_renders, k + 1, "frame {k}: one see-through layer per frame");
-        assert_eq!(fb.see_through_objects(), &see_through(&PreparedScene::new(&scene))[..]);
+        assert_eq!(fb.see_through_renders, renders, "frame {k}");
+        assert_eq!(cpu.fallback_cache().unwrap().see_through_renders, renders, "frame {k} on the CPU");
+        assert_eq!(fb.see_through_objects(), &objects[..]);
     }
 }
 

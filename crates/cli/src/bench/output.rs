@@ -42,7 +42,7 @@ pub(super) fn policy_name(p: Policy) -> &'static str {
     }
 }
 
-pub const FRAMES_CSV_HEADER: &str = "set,mode,frame,time_s,frame_ms,capsule_ms,raster_ms,heuristic_ms,trace_ms,blend_ms,spent,budget,budget_ms,all_cost,visible,selected,churn,flip,fallback_ms,shadow_map_renders,probe_renders";
+pub const FRAMES_CSV_HEADER: &str = "set,mode,frame,time_s,frame_ms,capsule_ms,raster_ms,heuristic_ms,trace_ms,blend_ms,spent,budget,budget_ms,all_cost,visible,selected,churn,flip,fallback_ms,shadow_map_renders,probe_renders,see_through_renders";
 
 pub(super) fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map_or(String::new(), |v| v.to_string())
@@ -55,7 +55,7 @@ pub(super) fn frames_csv<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> 
         let t = &r.timings;
         let _ = writeln!(
             s,
-            "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{:.3},{},{}",
+            "{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{:.3},{},{},{}",
             r.set,
             r.mode,
             r.frame,
@@ -76,7 +76,8 @@ pub(super) fn frames_csv<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> 
             opt(r.flip.map(|f| format!("{f:.5}"))),
             t.fallback,
             r.fallback_renders.shadow_maps,
-            r.fallback_renders.probes
+            r.fallback_renders.probes,
+            r.fallback_renders.see_through
         );
     }
     s
