@@ -393,8 +393,17 @@ mod tests {
         let cols = FRAMES_CSV_HEADER.split(',').count();
         assert_eq!(lines[1].split(',').count(), cols);
         assert!(lines[1].starts_with("path,hybrid,0,0,2.000,"));
-        // FLIP, then the fallback stage's milliseconds (the last column).
-        assert!(lines[1].ends_with(",0.01230,0.000"), "{}", lines[1]);
+        // Each column found by its header name: FLIP, the fallback stage's milliseconds and
+        // what it rendered.
+        let field = |name: &str| {
+            let k = FRAMES_CSV_HEADER.split(',').position(|c| c == name).unwrap_or_else(|| panic!("no column {name}"));
+            lines[1].split(',').nth(k).unwrap().to_string()
+        };
+        assert_eq!(field("flip"), "0.01230", "{}", lines[1]);
+        assert_eq!(field("fallback_ms"), "0.000", "{}", lines[1]);
+        for renders in ["shadow_map_renders", "probe_renders", "see_through_renders"] {
+            assert_eq!(field(renders), "0", "{}", lines[1]);
+        }
     }
 
     #[test]
