@@ -394,9 +394,8 @@ intensity = 1.0
     assert_eq!(renders(&r), 1);
     assert_eq!(again.buffers.refraction_fallback, raster.buffers.refraction_fallback);
     // ... and while it stays close: moved by 0.9 of what `see_through_layer_kept` allows from
-    // the nearest see-through object, the kept layer
-    // gives nearly the refractions a fresh one does; moved by 1.1 of it, the layer is rendered
-    // again.
+    // the nearest see-through object, the kept layer gives nearly the refractions a fresh one
+    // does; moved by 1.1 of it, the layer is rendered again.
     let see_through = hybrid_core::fallback::see_through_objects(&prepared, &refractors);
     let needed = vec![true; see_through.len()];
     let nearest = hybrid_core::fallback::nearest_see_through(scene.camera.position, &prepared.object_bounds, &see_through, &needed);

@@ -8,8 +8,9 @@
 //! when the object first has untraced pixels. Planar and convex refractive objects refract
 //! through the see-through layer (`SeeThrough`): the frame's view widened, rendered by the same
 //! raster and lighting passes without them into its own targets, when one has untraced pixels
-//! and the view has left the kept layer's 2° (`see_through_layer_kept`), before the probes (the objects it shows get probes: its texels are shaded as the
-//! trace shades a secondary hit, `FallbackScene::through_layer`). A refracted ray is followed out
+//! and the view has left the kept layer's 2° (`see_through_layer_kept`), before the probes
+//! (the objects it shows get probes: its texels are shaded as the trace shades a secondary
+//! hit, `FallbackScene::through_layer`). A refracted ray is followed out
 //! of a sphere or convex refractor first (`Refractor::leave`; hull planes in one buffer).
 //! Probe faces and that layer sample textures at level 0 (`RasterPass::encode_triangles`). One
 //! compute pass (`shaders/fallback.wgsl`, the twin of `FallbackScene::pixel`) then writes the
@@ -263,8 +264,6 @@ pub struct FallbackGpu {
     pub see_through_renders: u64,
     /// The camera the see-through layer was last rendered with.
     see_through_view: Option<Camera>,
-    /// Per object: its bounds (`nearest_see_through`).
-    object_bounds: Vec<Aabb>,
 }
 
 impl FallbackGpu {
@@ -507,7 +506,6 @@ impl FallbackGpu {
             probe_renders: 0,
             see_through_renders: 0,
             see_through_view: None,
-            object_bounds: prepared.object_bounds.clone(),
         })
     }
 
@@ -694,11 +692,10 @@ impl FallbackGpu {
     /// (`hybrid_core::fallback::SeeThrough`), when a see-through object is in `needed`
     /// (per object: has untraced pixels): the widened view (`see_through_view`) rasterized
     /// without those objects' meshes (textures at level 0) and lit, in its own submission (the
-    /// frame uniforms hold its camera). Its texels are shaded with
-    /// their own probes, so the objects that show in it need probes too, as on the CPU. The
-    /// layer is kept while the view stays close to its own (`see_through_layer_kept`, as on the
-    /// CPU). While
-    /// some object's planned probe is not rendered yet, `counter` (the heuristic's count pass,
+    /// frame uniforms hold its camera). Its texels are shaded with their own probes, so the
+    /// objects that show in it need probes too, as on the CPU. The layer is kept while the view
+    /// stays close to its own (`see_through_layer_kept`, as on the CPU). While some object's
+    /// planned probe is not rendered yet, `counter` (the heuristic's count pass,
     /// whose counts the frame has already read) counts the layer's pixels per object id in that
     /// submission, read back (the host waits for the GPU then). Writes the lookups' params (the
     /// layer's view, or none). Returns, when the layer was rendered, per object whether it shows
@@ -709,7 +706,7 @@ impl FallbackGpu {
         &mut self,
         ctx: &GpuContext,
         scene_gpu: &SceneGpu,
-        scene: &Scene,
+        prepared: &PreparedScene,
         raster: &RasterPass,
         lighting: &LightingPass,
         counter: &HeuristicPasses,
@@ -720,23 +717,22 @@ impl FallbackGpu {
         let need = needed.iter().zip(&self.see_through_objects).any(|(&n, &s)| n && s);
         self.params_data.see_through = u32::from(need);
         let mut shown = None;
-        if need {
+        let (view, w, h) = see_through_view(camera, width, height);
+        let layer_size = (self.see_through_targets.width, self.see_through_targets.height);
+        let kept = |layer: Camera| {
+            let nearest = nearest_see_through(camera.position, &prepared.object_bounds, &self.see_through_objects, needed);
+            see_through_layer_kept(&layer, layer_size, &view, (w, h), nearest)
+        };
+        if need && !self.see_through_view.is_some_and(kept) {
             // Per object: a planned probe not rendered yet; with none, nothing is worth counting.
             let missing: Vec<bool> = self.plans.iter().zip(&self.probe_rendered).map(|(p, &done)| p.is_some() && !done).collect();
             let count = missing.iter().any(|&m| m);
-            let (view, w, h) = see_through_view(camera, width, height);
-            let nearest = nearest_see_through(camera.position, &self.object_bounds, &self.see_through_objects, needed);
-            let layer_size = (self.see_through_targets.width, self.see_through_targets.height);
-            if self.see_through_view.is_some_and(|kept| see_through_layer_kept(&kept, layer_size, &view, (w, h), nearest)) {
-                ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&self.params_data));
-                return Ok(None);
-            }
             self.see_through_view = Some(view);
             if (self.see_through_targets.width, self.see_through_targets.height) != (w, h) {
                 self.see_through_targets = FrameTargets::raster_layer(&ctx.device, w, h);
             }
             let targets = &self.see_through_targets;
-            scene_gpu.write_uniforms(ctx, &view, w, h, &scene.environment);
+            scene_gpu.write_uniforms(ctx, &view, w, h, &prepared.scene.environment);
             let mut timer = StageTimer::disabled();
             let mut enc = ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fallback: see-through") });
             raster.encode_triangles(&mut enc, scene_gpu, targets, true, &self.see_through_ranges, &mut timer);

@@ -443,11 +443,12 @@ impl<'s> GpuRenderer<'s> {
         if needed.iter().any(|&x| x) {
             let start = Instant::now();
             // The see-through layer (planar refractive objects with untraced pixels; kept while
-            // the view stays close to its own), before the probes: the objects that show in it are shaded with their probes too.
+            // the view stays close to its own), before the probes: the objects that show in it
+            // are shaded with their probes too.
             let see_through = fb.render_see_through(
                 &self.ctx,
                 &self.gpu_scene,
-                self.scene,
+                &self.prepared,
                 &self.raster,
                 &self.lighting,
                 &self.heuristic_passes,
