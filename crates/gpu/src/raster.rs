@@ -5,7 +5,7 @@
 //! corner `vi % 3` of triangle `vi / 3` from group 0. The fragment shader evaluates the surface
 //! with common/*.wgsl's `evaluate_surface` (the CPU's `TriangleSurface::at`), its UV footprint from
 //! the fine screen derivatives of the UV, and writes the eight G-buffer targets
-//! ([`GBUFFER_COLOR_FORMATS`]) and reversed-Z depth (Greater, write on). No face culling: the
+//! ([`GBUFFER_COLOR_FORMATS`](crate::targets::GBUFFER_COLOR_FORMATS)) and reversed-Z depth (Greater, write on). No face culling: the
 //! CPU rasteriser draws both sides too.
 
 use std::sync::OnceLock;
