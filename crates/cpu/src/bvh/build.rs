@@ -112,24 +112,29 @@ impl SceneBvh {
                 (nodes, packer)
             }
             Some(inner) => {
-                let c = collapse(&BuildTree::NEW, inner, 0, node_capacity, &new_packer);
+                let c = collapse(&BuildTree::NEW, inner, COLLAPSE_LEVELS, node_capacity, &new_packer);
                 (c.nodes, c.sink)
             }
         };
-        drop(root);
         let Packer { packs: descs, leaves, .. } = packer;
 
         // Per pack lane (slot), in parallel passes that each write their array once: the
         // triangle (`NO_TRI` in unused lanes) and its shadow transparency; then per pack the
-        // triangle data and the shadow bits.
-        let slot_ref: Vec<TriangleRef> = (0..descs.len() * 4)
-            .into_par_iter()
-            .map(|slot| {
-                let (first, n) = descs[slot / 4];
-                let lane = (slot % 4) as u32;
-                if lane < n { prepared.triangles[prims[(first + lane) as usize].index() as usize] } else { NO_TRI }
-            })
-            .collect();
+        // triangle data and the shadow bits. The binary tree is freed meanwhile, on the other
+        // thread (one free per inner node, serial otherwise).
+        let ((), slot_ref) = rayon::join(
+            move || drop(root),
+            || -> Vec<TriangleRef> {
+                (0..descs.len() * 4)
+                    .into_par_iter()
+                    .map(|slot| {
+                        let (first, n) = descs[slot / 4];
+                        let lane = (slot % 4) as u32;
+                        if lane < n { prepared.triangles[prims[(first + lane) as usize].index() as usize] } else { NO_TRI }
+                    })
+                    .collect()
+            },
+        );
         let triangles = prims.len();
         drop(prims);
         let slot_shadow: Vec<f32> =
@@ -158,6 +163,9 @@ impl SceneBvh {
         SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles, leaves }
     }
 }
+
+/// Levels of 4-wide nodes whose subtrees are collapsed in parallel.
+const COLLAPSE_LEVELS: u32 = 2;
 
 impl<'a> LeafSink<&'a BuildNode> for Packer<'_> {
     fn leaf(&mut self, r: &'a BuildNode, nodes: &mut Vec<Node4>) -> u32 {
