@@ -60,27 +60,21 @@ impl SphereBvh {
             })
             .collect();
         // A node's box is its centres' box grown by `r` (x ↦ x ± r rounds monotonically).
-        let (nodes, root, root_min, root_max) = if prims.is_empty() {
-            (Vec::new(), LEAF, Vec3::ZERO, Vec3::ZERO)
+        let (nodes, root, root_min, root_max, tree) = if prims.is_empty() {
+            (Vec::new(), LEAF, Vec3::ZERO, Vec3::ZERO, None)
         } else {
             let pb = PrimBounds::of(&prims);
             let tree = build(&SPHERE_RULES, &mut prims, pb, 0, 0);
             let c = collapse(&BuildTree::NEW, &tree, 2, 0, &|| SphereLeaves);
-            (c.nodes, c.root, Vec3::from(pb.bounds.min), Vec3::from(pb.bounds.max))
+            (c.nodes, c.root, Vec3::from(pb.bounds.min), Vec3::from(pb.bounds.max), Some(tree))
         };
         let axis = |a: usize| {
             prims.par_iter().map(|p| centers[p.index() as usize][a]).chain(rayon::iter::repeat_n(0.0, LEAF_MAX - 1)).collect::<Vec<f32>>()
         };
-        Ok(Self {
-            radius,
-            xs: axis(0),
-            ys: axis(1),
-            zs: axis(2),
-            indices: prims.par_iter().map(Prim::index).collect(),
-            nodes,
-            root,
-            root_min,
-            root_max,
-        })
+        // The binary tree is freed (one free per inner node, serial otherwise) on one thread
+        // while the others gather the centres in leaf order.
+        let ((), (xs, ys, zs, indices)) =
+            rayon::join(move || drop(tree), || (axis(0), axis(1), axis(2), prims.par_iter().map(Prim::index).collect()));
+        Ok(Self { radius, xs, ys, zs, indices, nodes, root, root_min, root_max })
     }
 }
