@@ -20,19 +20,14 @@ pub(super) const INTERSECT_COST: f32 = 0.6;
 pub(super) const TRIANGLE_RULES: BuildRules = BuildRules {
     traversal_cost: TRAVERSAL_COST,
     intersect_cost: INTERSECT_COST,
-    leaf_units: packs_of,
+    // Triangles are tested four at a time (one pack).
+    leaf_unit_shift: 2,
     max_leaf: MAX_LEAF,
     small_is_leaf: false,
     leaf_at_depth: MAX_DEPTH,
     halve_at_depth: u32::MAX,
     widest_axis_only: false,
 };
-
-/// Leaf cost unit: triangles are tested four at a time.
-#[inline]
-pub(super) fn packs_of(n: usize) -> f32 {
-    n.div_ceil(4) as f32
-}
 
 /// The build's primitive of triangle `index` with corners `corners`. Non-finite corners make a
 /// point box: such triangles can never be hit anyway.

@@ -21,10 +21,12 @@ pub(crate) const PARALLEL_BIN_MIN: usize = 32 * 1024;
 pub(crate) struct BuildRules {
     /// SAH cost of a node test, in the unit of `intersect_cost`.
     pub(crate) traversal_cost: f32,
-    /// SAH cost of one of a leaf's test units (see `leaf_units`).
+    /// SAH cost of one of a leaf's test units (see [`BuildRules::leaf_units`]).
     pub(crate) intersect_cost: f32,
-    /// The test units of a leaf of `n` primitives (four triangles are tested at once).
-    pub(crate) leaf_units: fn(usize) -> f32,
+    /// A leaf's primitives are tested `1 << leaf_unit_shift` at a time (four triangles at once:
+    /// 2; spheres one by one: 0). A shift rather than a function, so the SAH sweep's cost of
+    /// every candidate split is inline arithmetic instead of two indirect calls.
+    pub(crate) leaf_unit_shift: u32,
     /// Nodes of more primitives always split; smaller ones become leaves where the SAH says a
     /// split costs more (or always, with `small_is_leaf`).
     pub(crate) max_leaf: usize,
@@ -39,6 +41,14 @@ pub(crate) struct BuildRules {
     /// splits the other axes would have found (for point clouds the widest axis nearly always
     /// holds the best one).
     pub(crate) widest_axis_only: bool,
+}
+
+impl BuildRules {
+    /// The test units of a leaf of `n` primitives: `n / 2^leaf_unit_shift`, rounded up.
+    #[inline(always)]
+    pub(crate) fn leaf_units(&self, n: usize) -> f32 {
+        ((n + (1 << self.leaf_unit_shift) - 1) >> self.leaf_unit_shift) as f32
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -275,14 +285,14 @@ pub(crate) fn build(rules: &BuildRules, prims: &mut [Prim], pb: PrimBounds, offs
     // A split costs at least one node test more than a leaf of one unit.
     if n <= 1
         || depth >= rules.leaf_at_depth
-        || (small && (rules.small_is_leaf || (rules.leaf_units)(n) * rules.intersect_cost <= rules.traversal_cost))
+        || (small && (rules.small_is_leaf || rules.leaf_units(n) * rules.intersect_cost <= rules.traversal_cost))
     {
         return leaf;
     }
     let nb = n.clamp(4, BINS);
     let split = if depth >= rules.halve_at_depth { None } else { best_split(rules, prims, &cb, &bounds, nb) };
     let parts = match split {
-        Some(s) if s.cost < (rules.leaf_units)(n) * rules.intersect_cost || !small => {
+        Some(s) if s.cost < rules.leaf_units(n) * rules.intersect_cost || !small => {
             let scale = bin_scale(&cb, nb);
             let (axis, bin) = (s.axis, s.last_left_bin);
             let (lo, sc) = (cb.min[axis], scale[axis]);
@@ -347,9 +357,10 @@ pub(crate) fn best_split(rules: &BuildRules, prims: &[Prim], cb: &Bounds, bounds
             if nl == 0 || nr == 0 {
                 continue;
             }
-            let units = rules.leaf_units;
             let cost = rules.traversal_cost
-                + rules.intersect_cost * (left.half_area() * units(nl as usize) + right_area[i + 1] * units(nr as usize)) * inv_area;
+                + rules.intersect_cost
+                    * (left.half_area() * rules.leaf_units(nl as usize) + right_area[i + 1] * rules.leaf_units(nr as usize))
+                    * inv_area;
             if best.is_none_or(|b| cost < b.cost) {
                 best = Some(Split { axis, last_left_bin: i, cost });
             }
@@ -434,6 +445,24 @@ mod tests {
             assert!(!raw.w.is_subnormal(), "{v:?}: w = {:e}", raw.w);
         }
         assert_eq!(p.centroid2(), Vec3A::new(3.0, 5.0, 7.0));
+    }
+
+    #[test]
+    fn leaf_units_round_up_to_whole_test_units() {
+        let rules = |leaf_unit_shift| BuildRules {
+            traversal_cost: 1.0,
+            intersect_cost: 1.0,
+            leaf_unit_shift,
+            max_leaf: 8,
+            small_is_leaf: false,
+            leaf_at_depth: 56,
+            halve_at_depth: u32::MAX,
+            widest_axis_only: false,
+        };
+        let (packs, single) = (rules(2), rules(0));
+        let got: Vec<f32> = [0, 1, 4, 5, 8, 9, 255_361].iter().map(|&n| packs.leaf_units(n)).collect();
+        assert_eq!(got, [0.0, 1.0, 1.0, 2.0, 2.0, 3.0, 63_841.0]);
+        assert_eq!((single.leaf_units(0), single.leaf_units(7)), (0.0, 7.0));
     }
 
     #[test]

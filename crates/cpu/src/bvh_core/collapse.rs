@@ -180,7 +180,7 @@ mod tests {
         let rules = BuildRules {
             traversal_cost: 1.0,
             intersect_cost: 1.0,
-            leaf_units: |n| n as f32,
+            leaf_unit_shift: 0,
             max_leaf: 4,
             small_is_leaf: true,
             leaf_at_depth: u32::MAX,

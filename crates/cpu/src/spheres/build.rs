@@ -15,7 +15,7 @@ use crate::bvh_core::{LeafSink, collapse};
 pub(super) const SPHERE_RULES: BuildRules = BuildRules {
     traversal_cost: 1.0,
     intersect_cost: 1.0,
-    leaf_units: |n| n as f32,
+    leaf_unit_shift: 0,
     max_leaf: LEAF_MAX,
     small_is_leaf: true,
     leaf_at_depth: u32::MAX,
