@@ -95,7 +95,6 @@ impl SceneBvh {
             build(&TRIANGLE_RULES, &mut prims, pb, 0, 0)
         });
 
-        let node_capacity = prims.len() / 8;
         let new_packer = || Packer { prims: &prims, packs: Vec::with_capacity(prims.len() / 3), leaves: 0 };
         let (nodes, packer) = match &root {
             None => (Vec::new(), new_packer()),
@@ -107,7 +106,7 @@ impl SceneBvh {
                 (nodes, packer)
             }
             Some(inner) => {
-                let c = collapse(&BuildTree::NEW, inner, COLLAPSE_LEVELS, node_capacity, &new_packer);
+                let c = collapse(&BuildTree::NEW, inner, COLLAPSE_LEVELS, 0, &new_packer);
                 (c.nodes, c.sink)
             }
         };
@@ -159,7 +158,8 @@ impl SceneBvh {
     }
 }
 
-/// Levels of 4-wide nodes whose subtrees are collapsed in parallel.
+/// Levels of 4-wide nodes whose subtrees are collapsed in parallel (16 subtrees for two
+/// threads; the parallel collapse sizes its node array exactly, so no capacity is passed).
 const COLLAPSE_LEVELS: u32 = 2;
 
 impl<'a> LeafSink<&'a BuildNode> for Packer<'_> {
