@@ -18,7 +18,11 @@
 //!   `closest_hit`, Embree `rtcIntersect1`;
 //! - primary rays of the scene's camera (640×360, in 4×4 pixel tiles): ours `closest_hit` one
 //!   ray at a time, then ours `closest_hits` one 16-ray packet per tile (every answer checked to
-//!   be the single ray's), against Embree `rtcIntersect16`, one 16-ray packet per tile.
+//!   be the single ray's), against Embree `rtcIntersect16`, one 16-ray packet per tile;
+//! - reflection and diffuse-bounce rays again, ours as ray streams of `STREAM` rays
+//!   (`closest_hits_stream`, the trace stage's path for first reflection and refraction rays),
+//!   against Embree `rtcIntersect1` as above; it prints how many answers are not bit for bit
+//!   the single ray's (rays through shared edges may keep the neighbouring triangle).
 //!
 //! Rays go out in chunks of 256 on rayon's pool (2 threads here), for both. Each line gives the
 //! best of `TRACE_PASSES` (default 5) wall-clock passes, and the ratio ours / Embree. The answers
@@ -36,7 +40,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use hybrid_core::PreparedScene;
-use hybrid_cpu::bvh::SceneBvh;
+use hybrid_cpu::bvh::{Hit, STREAM, SceneBvh};
 use rayon::prelude::*;
 use trace_scenes::{load_average, primary_hits, primary_tiles, rays, scenes, trace_closest_hits, trace_primary, trace_shadow_rays};
 
@@ -404,6 +408,24 @@ fn main() {
                 );
             };
             line(name, kind, rays.len(), "rays", race(passes, ours, theirs));
+
+            // Ours as ray streams of `STREAM` rays: the same answers as one at a time (a ray
+            // through a shared edge may find the neighbouring triangle, within rounding).
+            let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.triangle, h.bary.to_array().map(f32::to_bits)));
+            let single: Vec<_> = rays.par_iter().map(|&(o, d)| bits(bvh.closest_hit(o, d, 0.0, f32::INFINITY))).collect();
+            let streamed: Vec<_> =
+                rays.par_chunks(STREAM).flat_map_iter(|c| bvh.closest_hits_stream(c, 0.0, f32::INFINITY).into_iter().map(bits)).collect();
+            let differ = single.iter().zip(&streamed).filter(|(a, b)| a != b).count();
+            println!("{name:>10} {kind} in streams: {differ} of {} answers not bit for bit the single ray's", rays.len());
+            let ours = || {
+                std::hint::black_box(
+                    rays.par_chunks(STREAM)
+                        .with_max_len(1)
+                        .map(|c| bvh.closest_hits_stream(c, 0.0, f32::INFINITY).iter().flatten().map(|h| h.t).sum::<f32>())
+                        .sum::<f32>(),
+                );
+            };
+            line(name, &format!("{kind}, streams"), rays.len(), "rays", race(passes, ours, theirs));
         }
 
         // Primary rays of the scene's camera at WIDTH × HEIGHT, in 4×4 pixel tiles (the coherent

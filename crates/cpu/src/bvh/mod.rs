@@ -11,6 +11,8 @@
 //!   `(t, pack slot)` pair, so it does not depend on the order leaves are visited in;
 //! - `closest_hits` (`packet.rs`): the same for up to 16 coherent rays at once (a 4×4 tile of
 //!   primary rays), each ray's hit bit for bit `closest_hit`'s;
+//! - `closest_hits_stream` (`stream.rs`): the same for thousands of rays of any coherence at
+//!   once, breadth-first by node (the trace stage's first reflection and refraction rays);
 //! - `any_hit_attenuation` (listing 8b): unordered traversal that visits every triangle on the
 //!   segment once and stops as soon as the attenuation reaches 0. Which triangles matter to
 //!   shadow rays is precomputed per triangle: materials that cast no shadows (or are fully
@@ -146,9 +148,11 @@ pub struct SceneBvh {
 mod build;
 mod packet;
 mod shadow;
+mod stream;
 mod traverse;
 
 pub use packet::{PACKET, PacketRay};
+pub use stream::STREAM;
 
 #[cfg(test)]
 use build::*;
@@ -295,6 +299,54 @@ mod tests {
             assert!(packet[chunk.len()..].iter().all(Option::is_none));
         }
         hits
+    }
+
+    #[test]
+    fn streams_answer_as_single_rays_do() {
+        let scene = soup_scene(3000, 11, vec![Material::default()]);
+        let p = PreparedScene::new(&scene);
+        let bvh = SceneBvh::build(&p);
+        let mut rng = StdRng::seed_from_u64(5);
+        // Fans of nearby rays (coherent), then random rays with zero components and rays along
+        // axes (infinite inverses): more than one stream's worth, so the input is cut.
+        let mut rays = Vec::new();
+        for _ in 0..200 {
+            let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0));
+            let centre =
+                (Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0)) - eye).normalize();
+            let (right, up) = centre.any_orthonormal_pair();
+            for j in 0..16 {
+                let (x, y) = ((j % 4) as f32 - 1.5, (j / 4) as f32 - 1.5);
+                rays.push((eye, (centre + (right * x + up * y) * 0.02).normalize()));
+            }
+        }
+        for k in 0..3000 {
+            let (o, mut d) = random_ray(&mut rng);
+            if k % 11 == 0 {
+                d[k % 3] = 0.0;
+            }
+            if k % 13 == 0 {
+                d = [Vec3::X, Vec3::NEG_Y, Vec3::Z][k % 3];
+            }
+            rays.push((o, d));
+        }
+        assert!(rays.len() > STREAM);
+        let mut hits = 0;
+        for (t_min, t_max) in [(0.0, f32::INFINITY), (0.5, 12.0)] {
+            for rays in [&rays[..], &rays[..1], &rays[3200..3210]] {
+                let streamed = bvh.closest_hits_stream(rays, t_min, t_max);
+                assert_eq!(streamed.len(), rays.len());
+                for (k, (&(o, d), &h)) in rays.iter().zip(&streamed).enumerate() {
+                    let single = bvh.closest_hit(o, d, t_min, t_max);
+                    assert_eq!(hit_bits(h), hit_bits(single), "ray {k}: {o} {d}, t in ({t_min}, {t_max})");
+                    hits += usize::from(single.is_some());
+                }
+            }
+        }
+        assert!(hits > 3000, "too few hits to test anything: {hits}");
+        // No triangles: no hits.
+        let empty = SceneBvh::build(&PreparedScene::new(&soup_scene(0, 1, vec![Material::default()])));
+        assert!(empty.closest_hits_stream(&rays[..5], 0.0, f32::INFINITY).iter().all(Option::is_none));
     }
 
     #[test]

@@ -29,11 +29,7 @@ impl SceneBvh {
         // that nothing ties with `t_max` itself, so a hit was found iff `best_t < t_max`.
         let mut best = ClosestSoFar { t: t_max, slot: 0, uv: (0.0, 0.0) };
         self.closest_from(stack, &r, t_min, 0, &mut best);
-        (best.t < t_max).then(|| Hit {
-            t: best.t,
-            triangle: self.slot_ref[best.slot],
-            bary: Vec3::new(1.0 - best.uv.0 - best.uv.1, best.uv.0, best.uv.1),
-        })
+        (best.t < t_max).then(|| self.hit_of(&best))
     }
 
     /// The closest-hit traversal of the subtree of `start` (a node index or a leaf reference),
@@ -51,29 +47,48 @@ impl SceneBvh {
             &mut best_t,
             &test,
             #[inline(always)]
-            |leaf: u32, mut best_t: f32| {
-                let range = leaf_packs(leaf);
-                let first = range.start;
-                for (pi, pack) in self.packs[range].iter().enumerate() {
-                    let (t, u, v, mut mask) = intersect4_upto(pack, r, t_min, best_t);
-                    if mask != 0 {
-                        let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
-                        while mask != 0 {
-                            let lane = mask.trailing_zeros() as usize & 3;
-                            mask &= mask - 1;
-                            let slot = (first + pi) * 4 + lane;
-                            if t[lane] < best_t || (t[lane] == best_t && slot < best) {
-                                best_t = t[lane];
-                                best = slot;
-                                best_uv = (u[lane], v[lane]);
-                            }
-                        }
-                    }
-                }
-                (best_t, false)
-            },
+            |leaf: u32, best_t: f32| (self.leaf_closest(leaf, r, t_min, best_t, &mut best, &mut best_uv), false),
         );
         *closest = ClosestSoFar { t: best_t, slot: best, uv: best_uv };
+    }
+
+    /// Tests the packs of `leaf` for a hit closer than `(best_t, best)` (the `(t, slot)` rule);
+    /// returns the new closest distance, with `best` and `best_uv` updated on a hit.
+    #[inline(always)]
+    pub(super) fn leaf_closest(
+        &self,
+        leaf: u32,
+        r: &RayPre,
+        t_min: f32,
+        mut best_t: f32,
+        best: &mut usize,
+        best_uv: &mut (f32, f32),
+    ) -> f32 {
+        let range = leaf_packs(leaf);
+        let first = range.start;
+        for (pi, pack) in self.packs[range].iter().enumerate() {
+            let (t, u, v, mut mask) = intersect4_upto(pack, r, t_min, best_t);
+            if mask != 0 {
+                let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize & 3;
+                    mask &= mask - 1;
+                    let slot = (first + pi) * 4 + lane;
+                    if t[lane] < best_t || (t[lane] == best_t && slot < *best) {
+                        best_t = t[lane];
+                        *best = slot;
+                        *best_uv = (u[lane], v[lane]);
+                    }
+                }
+            }
+        }
+        best_t
+    }
+
+    /// The hit of a ray's closest hit so far.
+    #[inline(always)]
+    pub(super) fn hit_of(&self, c: &ClosestSoFar) -> Hit {
+        Hit { t: c.t, triangle: self.slot_ref[c.slot], bary: Vec3::new(1.0 - c.uv.0 - c.uv.1, c.uv.0, c.uv.1) }
     }
 
     /// Whether a triangle whose material casts shadows and is not fully transparent is hit

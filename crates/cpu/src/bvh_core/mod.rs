@@ -113,7 +113,9 @@ pub(crate) fn stack_entry(child: u32, near: f32) -> u64 {
 /// any-hit query).
 ///
 /// Whatever the leaf test's tie rule, the hit found is the one it prefers among all it is
-/// offered, so the order of the visits changes the time taken, not the answer.
+/// offered, so the order of the visits changes the time taken, not the answer, with one
+/// exception: a ray through an edge two triangles share, where rounding puts one triangle's
+/// hit a few ulps before its box's entry distance, keeps whichever it meets first.
 #[inline(always)]
 pub(crate) fn closest_walk<N: NodeTest>(
     nodes: &[Node4],
