@@ -40,7 +40,7 @@ use hybrid_core::{GBuffer, Surface};
 use hybrid_scene::Camera;
 use rayon::prelude::*;
 
-use crate::bvh::{PACKET, PacketRay, SceneBvh, ShadowCache};
+use crate::bvh::{Hit, PACKET, PacketRay, STREAM, SceneBvh, ShadowCache};
 use crate::camera_rays::PrimaryRays;
 use crate::capsule::PointCloudCapsule;
 use hybrid_core::prepare::PreparedScene;
@@ -65,8 +65,10 @@ pub struct TraceOutput {
 /// thread's stack.
 pub use hybrid_scene::{MAX_TRACE_DEPTH, MAX_TRACED_DEPTH, TRACE_RAY_BUDGET};
 
-/// Pixels per parallel work item (uneven ray cost: items are handed out one at a time).
-const CHUNK: usize = 64;
+/// Pixels per parallel work item (uneven ray cost: items are handed out one at a time). Their
+/// first reflection and refraction rays form one ray stream, so the larger the chunk the more
+/// rays share each node fetch, at the cost of coarser load balancing between threads.
+const CHUNK: usize = STREAM;
 
 /// Listing 8a over every pixel of `gbuffer` whose mask is > 0.
 pub fn trace(prepared: &PreparedScene, bvh: &SceneBvh, gbuffer: &GBuffer, camera: &Camera) -> TraceOutput {
@@ -119,14 +121,31 @@ pub fn trace_with_spheres_into(
         .map(|(c, ((s, m), r))| {
             let mut rays = RayCounts::default();
             let mut caches = vec![ShadowCache::default(); lights(&prepared.scene.lights).count()];
-            for k in 0..s.len() {
+            // The chunk's first reflection and refraction rays go out as one ray stream, in
+            // pixel order (the hits one at a time would find, found faster); the rest of each
+            // pixel's work, and the rays below those two, are traced pixel by pixel.
+            let surfaces: Vec<Option<(Surface, Vec3)>> = (0..s.len())
+                .map(|k| (gbuffer.mask[c * CHUNK + k] > 0.0).then(|| tracer.surface(gbuffer, c * CHUNK + k)).flatten())
+                .collect();
+            let first_rays: Vec<(Vec3, Vec3)> = surfaces
+                .iter()
+                .flatten()
+                .flat_map(|(surface, incident)| {
+                    let [refl, refr] = tracer.first_rays(surface, *incident);
+                    refl.into_iter().chain(refr)
+                })
+                .collect();
+            let hits = bvh.closest_hits_stream(&first_rays, 0.0, f32::INFINITY);
+            let mut first_hits = hits.into_iter();
+            for (k, surface) in surfaces.iter().enumerate() {
                 let i = c * CHUNK + k;
                 (s[k], m[k], r[k]) = if gbuffer.mask[i] > 0.0 {
-                    tracer.pixel(gbuffer, i, &mut caches, &mut rays)
+                    tracer.pixel(gbuffer, i, surface.as_ref(), &mut first_hits, &mut caches, &mut rays)
                 } else {
                     (Vec3::ONE, Vec3::ZERO, Vec3::ZERO)
                 };
             }
+            debug_assert!(first_hits.next().is_none(), "every streamed hit is used");
             rays
         })
         .reduce(RayCounts::default, |mut a, b| {
@@ -152,21 +171,66 @@ struct Tracer<'a, 's> {
 }
 
 impl Tracer<'_, '_> {
-    /// Listing 8a for pixel `i`: (shadow, reflection, refraction). `caches` holds one shadow
+    /// The surface drawn at pixel `i` (`None` where nothing is) and the view ray's direction
+    /// towards it.
+    #[inline]
+    fn surface(&self, g: &GBuffer, i: usize) -> Option<(Surface, Vec3)> {
+        let s = g.surface(i).filter(|s| s.normal.length_squared() > 0.0)?;
+        let incident = self.camera.incident_towards(s.position);
+        Some((s, incident))
+    }
+
+    /// Listing 8a for pixel `i`, whose surface and view direction are `surface`
+    /// ([`Tracer::surface`]): (shadow, reflection, refraction). `first_hits` yields the
+    /// closest triangle hits of the pixel's first reflection and refraction rays
+    /// ([`Tracer::first_rays`], in that order), traced beforehand. `caches` holds one shadow
     /// cache per light, carried from pixel to pixel.
-    fn pixel(&self, g: &GBuffer, i: usize, caches: &mut [ShadowCache], rays: &mut RayCounts) -> (Vec3, Vec3, Vec3) {
+    fn pixel(
+        &self,
+        g: &GBuffer,
+        i: usize,
+        surface: Option<&(Surface, Vec3)>,
+        first_hits: &mut impl Iterator<Item = Option<Hit>>,
+        caches: &mut [ShadowCache],
+        rays: &mut RayCounts,
+    ) -> (Vec3, Vec3, Vec3) {
         let scene = self.prepared.scene;
-        let surface = g.surface(i).filter(|s| s.normal.length_squared() > 0.0);
-        let Some(s) = surface else {
+        let Some(&(s, incident)) = surface else {
             // Nothing drawn (zero-length normal): the skybox behind the pixel.
             let (x, y) = ((i % g.width as usize) as u32, (i / g.width as usize) as u32);
             let (_, dir, _) = self.primary.ray(x, y);
             return (Vec3::ONE, sky(&scene.environment, &scene.textures, dir), Vec3::ZERO);
         };
-        let incident = self.camera.incident_towards(s.position);
         let view = -incident;
+        let [refl, refr] = self.first_rays(&s, incident);
+        let mut traced = |ray: Option<(Vec3, Vec3)>, importance: f32, kind: Kind, rays: &mut RayCounts| match ray {
+            Some((origin, dir)) => {
+                let hit = first_hits.next().expect("a streamed hit for every first ray");
+                self.secondary(origin, dir, Some(hit), importance, 1, kind, &mut 1, rays)
+            }
+            None => Vec3::ZERO,
+        };
+        let shadow = self.shadow_rays(&s, view, caches, rays);
+        let reflection = traced(refl, s.reflectivity, Kind::Reflection, rays);
+        let refraction = traced(refr, 1.0 - s.opacity, Kind::Refraction, rays);
+        (shadow, reflection, refraction)
+    }
 
-        (self.shadow_rays(&s, view, caches, rays), self.reflection_ray(&s, incident, rays), self.refraction_ray(&s, incident, rays))
+    /// Listing 8a's first rays from surface `s` seen along `incident`, as `(origin, dir)`: the
+    /// reflection ray (the view ray reflected about the normal) if the surface reflects, and
+    /// the refraction ray (refracted by the IOR ratio; reflected on total internal reflection)
+    /// if it is not opaque.
+    #[inline]
+    fn first_rays(&self, s: &Surface, incident: Vec3) -> [Option<(Vec3, Vec3)>; 2] {
+        let reflection = (s.reflectivity > 0.0).then(|| {
+            let dir = reflect(incident, s.normal).normalize_or_zero();
+            (self.offset(s, dir), dir)
+        });
+        let refraction = (s.opacity < 1.0).then(|| {
+            let (dir, _tir) = refract_or_reflect(incident, s.normal, self.prepared.scene.environment.ior, s.ior);
+            (self.offset(s, dir), dir)
+        });
+        [reflection, refraction]
     }
 
     /// Listing 8a's shadows for surface `s` seen along `view`: 1 minus the Blinn–Phong light of
@@ -200,30 +264,6 @@ impl Tracer<'_, '_> {
         shadow
     }
 
-    /// Listing 8a's reflection: the view ray (`incident`) reflected about the normal and traced,
-    /// if the surface reflects.
-    #[inline]
-    fn reflection_ray(&self, s: &Surface, incident: Vec3, rays: &mut RayCounts) -> Vec3 {
-        if s.reflectivity > 0.0 {
-            let dir = reflect(incident, s.normal).normalize_or_zero();
-            self.secondary(self.offset(s, dir), dir, s.reflectivity, 1, Kind::Reflection, &mut 1, rays)
-        } else {
-            Vec3::ZERO
-        }
-    }
-
-    /// Listing 8a's refraction: the view ray refracted by the IOR ratio (reflected on total
-    /// internal reflection) and traced, if the surface is not opaque.
-    #[inline]
-    fn refraction_ray(&self, s: &Surface, incident: Vec3, rays: &mut RayCounts) -> Vec3 {
-        if s.opacity < 1.0 {
-            let (dir, _tir) = refract_or_reflect(incident, s.normal, self.prepared.scene.environment.ior, s.ior);
-            self.secondary(self.offset(s, dir), dir, 1.0 - s.opacity, 1, Kind::Refraction, &mut 1, rays)
-        } else {
-            Vec3::ZERO
-        }
-    }
-
     /// `s.position` moved by the ray bias along the normal, to the side `dir` leaves towards.
     #[inline]
     fn offset(&self, s: &Surface, dir: Vec3) -> Vec3 {
@@ -239,6 +279,7 @@ impl Tracer<'_, '_> {
     }
 
     /// Traces a secondary ray: closest hit shaded with listing 8c, miss = skybox (listing 8d).
+    /// `triangle` is its closest triangle hit when already traced (`None`: trace it here).
     /// `admitted` counts the rays of this ray tree admitted so far (this one included), against
     /// [`TRACE_RAY_BUDGET`].
     #[allow(clippy::too_many_arguments)]
@@ -246,6 +287,7 @@ impl Tracer<'_, '_> {
         &self,
         origin: Vec3,
         dir: Vec3,
+        triangle: Option<Option<Hit>>,
         importance: f32,
         depth: u32,
         kind: Kind,
@@ -257,7 +299,7 @@ impl Tracer<'_, '_> {
             Kind::Refraction => rays.refraction += 1,
         }
         let scene = self.prepared.scene;
-        let triangle = self.bvh.closest_hit(origin, dir, 0.0, f32::INFINITY);
+        let triangle = triangle.unwrap_or_else(|| self.bvh.closest_hit(origin, dir, 0.0, f32::INFINITY));
         let sphere = self.spheres.and_then(|c| c.closest_surface(origin, dir, 0.0, triangle.map_or(f32::INFINITY, |h| h.t)));
         let s = match (sphere, triangle) {
             (Some((_, s)), _) => s,
@@ -282,12 +324,12 @@ impl Tracer<'_, '_> {
         let mut refr = Vec3::ZERO;
         if trace_refr {
             let (d, _tir) = refract_or_reflect(dir, s.normal, scene.environment.ior, s.ior);
-            refr = self.secondary(self.offset(&s, d), d, refr_imp, depth + 1, Kind::Refraction, admitted, rays);
+            refr = self.secondary(self.offset(&s, d), d, None, refr_imp, depth + 1, Kind::Refraction, admitted, rays);
         }
         let mut refl = Vec3::ZERO;
         if trace_refl {
             let d = reflect(dir, s.normal).normalize_or_zero();
-            refl = self.secondary(self.offset(&s, d), d, refl_imp, depth + 1, Kind::Reflection, admitted, rays);
+            refl = self.secondary(self.offset(&s, d), d, None, refl_imp, depth + 1, Kind::Reflection, admitted, rays);
         }
         let lighting = if reflectivity < 1.0 && transparency < 1.0 { self.frame_lights.local_lighting(&s, -dir) } else { Vec3::ZERO };
         if depth >= max_depth {
