@@ -19,6 +19,8 @@
 //! - primary rays of the scene's camera (640×360, in 4×4 pixel tiles): ours `closest_hit` one
 //!   ray at a time, then ours `closest_hits` one 16-ray packet per tile (every answer checked to
 //!   be the single ray's), against Embree `rtcIntersect16`, one 16-ray packet per tile;
+//! - shadow rays again, ours as ray streams of `STREAM` rays (`any_hit_attenuation_stream`),
+//!   with a cache (the trace stage's path: blocked runs one ray at a time) and without;
 //! - reflection and diffuse-bounce rays again, ours as ray streams of `STREAM` rays
 //!   (`closest_hits_stream`, the trace stage's path for first reflection and refraction rays),
 //!   against Embree `rtcIntersect1` as above; it prints how many answers are not bit for bit
@@ -40,7 +42,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use hybrid_core::PreparedScene;
-use hybrid_cpu::bvh::{Hit, STREAM, SceneBvh};
+use hybrid_cpu::bvh::{Hit, STREAM, SceneBvh, ShadowCache};
 use rayon::prelude::*;
 use trace_scenes::{load_average, primary_hits, primary_tiles, rays, scenes, trace_closest_hits, trace_primary, trace_shadow_rays};
 
@@ -394,6 +396,43 @@ fn main() {
             std::hint::black_box(trace_shadow_rays(&prepared, &bvh, &r.shadow, false));
         };
         line(name, "shadow rays, no cache", r.shadow.len(), "rays", race(passes, shadow_plain, shadow_embree));
+        // Ours as ray streams of `STREAM` rays: without a cache (every ray in the stream), and
+        // as the trace stage sends them (with a cache: blocked runs one ray at a time).
+        let single: Vec<u32> = r.shadow.par_iter().map(|&(o, d, t)| bvh.any_hit_attenuation(&prepared, o, d, t).to_bits()).collect();
+        for cached in [false, true] {
+            let streamed: Vec<u32> = r
+                .shadow
+                .par_chunks(STREAM)
+                .flat_map_iter(|c| {
+                    let mut cache = ShadowCache::default();
+                    bvh.any_hit_attenuation_stream(&prepared, c, cached.then_some(&mut cache)).into_iter().map(f32::to_bits)
+                })
+                .collect();
+            let differ = single.iter().zip(&streamed).filter(|(a, b)| a != b).count();
+            println!(
+                "{name:>10} shadow rays in streams{}: {differ} of {} attenuations not bit for bit the single ray's",
+                if cached { ", cache" } else { "" },
+                r.shadow.len()
+            );
+        }
+        let (shadow, bvh_ref, prepared_ref) = (&r.shadow, &bvh, &prepared);
+        let streams = |cached: bool| {
+            move || {
+                std::hint::black_box(
+                    shadow
+                        .par_chunks(STREAM)
+                        .with_max_len(1)
+                        .map(|c| {
+                            let mut cache = ShadowCache::default();
+                            bvh_ref.any_hit_attenuation_stream(prepared_ref, c, cached.then_some(&mut cache)).iter().sum::<f32>()
+                        })
+                        .sum::<f32>(),
+                );
+            }
+        };
+        line(name, "shadow rays, cache, streams", r.shadow.len(), "rays", race(passes, streams(true), shadow_embree));
+        let shadow_streams = streams(false);
+        line(name, "shadow rays, no cache, streams", r.shadow.len(), "rays", race(passes, shadow_streams, shadow_embree));
 
         for (kind, rays) in [("reflection rays", &r.reflection), ("diffuse-bounce rays", &r.diffuse)] {
             let ours = || {

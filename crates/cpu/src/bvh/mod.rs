@@ -13,6 +13,8 @@
 //!   primary rays), each ray's hit bit for bit `closest_hit`'s;
 //! - `closest_hits_stream` (`stream.rs`): the same for thousands of rays of any coherence at
 //!   once, breadth-first by node (the trace stage's first reflection and refraction rays);
+//!   `any_hit_attenuation_stream` likewise for a light's shadow rays, one at a time with the
+//!   shadow cache where they are being blocked, as a stream where they reach the light;
 //! - `any_hit_attenuation` (listing 8b): unordered traversal that visits every triangle on the
 //!   segment once and stops as soon as the attenuation reaches 0. Which triangles matter to
 //!   shadow rays is precomputed per triangle: materials that cast no shadows (or are fully
@@ -506,6 +508,51 @@ mod tests {
             }
         }
         assert!(blocked > 1000 && from_cache > 300, "too few blocked rays to test the cache: {blocked}, {from_cache} from the cache");
+    }
+
+    #[test]
+    fn shadow_streams_attenuate_as_single_rays_do() {
+        // Opaque, half-transparent and non-casting triangles mixed; bundles of nearby rays (as
+        // a light's shadow rays) and single ones, more than one stream's worth.
+        let mats = vec![
+            Material::default(),
+            Material { opacity: 0.5, ..Default::default() },
+            Material { casts_shadows: false, ..Default::default() },
+        ];
+        let scene = soup_scene(3000, 13, mats);
+        let p = PreparedScene::new(&scene);
+        let bvh = SceneBvh::build(&p);
+        let mut rng = StdRng::seed_from_u64(17);
+        let mut rays = Vec::new();
+        for k in 0..3000 {
+            let (o, d) = random_ray(&mut rng);
+            let t_max = rng.random_range(2.0..20.0);
+            for j in 0..if k % 2 == 0 { 4 } else { 1 } {
+                rays.push((o + Vec3::splat(j as f32 * 1e-3), d, t_max));
+            }
+        }
+        assert!(rays.len() > STREAM);
+        let single: Vec<f32> = rays.iter().map(|&(o, d, t)| bvh.any_hit_attenuation(&p, o, d, t)).collect();
+        let (mut blocked, mut partial) = (0, 0);
+        for cached in [false, true] {
+            // Without a cache (every ray in the stream) and with one carried from call to call
+            // (blocked runs one ray at a time), the same attenuations.
+            let mut cache = ShadowCache::default();
+            let mut streamed = Vec::new();
+            for part in rays.chunks(5000) {
+                streamed.extend(bvh.any_hit_attenuation_stream(&p, part, cached.then_some(&mut cache)));
+            }
+            for (k, (&a, &b)) in single.iter().zip(&streamed).enumerate() {
+                // Several transparent casters may be multiplied in another order.
+                assert!(a == b || (a > 0.0 && (a - b).abs() <= 1e-6 * a), "ray {k}: single {a}, stream {b}");
+                blocked += u32::from(a == 0.0);
+                partial += u32::from(a > 0.0 && a < 1.0);
+            }
+        }
+        assert!(blocked > 1000 && partial > 300, "too few blocked or partly shadowed rays: {blocked}, {partial}");
+        // No triangles: nothing blocks.
+        let empty = SceneBvh::build(&PreparedScene::new(&soup_scene(0, 1, vec![Material::default()])));
+        assert_eq!(empty.any_hit_attenuation_stream(&p, &rays[..3], None), [1.0; 3]);
     }
 
     #[test]

@@ -30,36 +30,12 @@ impl SceneBvh {
             return 1.0;
         }
         let r = RayPre::new(Vec3A::from(origin), Vec3A::from(dir));
-        // A cache from another tree only costs time: any pack of this tree hit by an opaque lane
-        // is a true blocker.
-        if cache.leaf != EMPTY_SLOT && leaf_packs(cache.leaf).end <= self.packs.len() {
-            let range = leaf_packs(cache.leaf);
-            for (pack, &shadow) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]) {
-                let (_, _, _, hit) = intersect4(pack, &r, 0.0, t_max);
-                if hit & (shadow as u32 >> 4) != 0 {
-                    return 0.0;
-                }
-            }
+        if self.cache_blocks(cache, &r, t_max) {
+            return 0.0;
         }
         let mut att = 1.0f32;
-        self.for_each_pack_hit_with(&r, 0.0, t_max, |leaf, slot0, mut mask, u, v| {
-            if mask >> 4 != 0 {
-                // An opaque blocker.
-                cache.leaf = leaf;
-                att = 0.0;
-                return false;
-            }
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize & 3;
-                mask &= mask - 1;
-                let tr = self.slot_shadow[slot0 + lane];
-                let tr = if tr == SHADOW_EVALUATE { self.textured_transparency(prepared, slot0 + lane, u[lane], v[lane]) } else { tr };
-                att *= tr;
-                if att <= 0.0 {
-                    return false;
-                }
-            }
-            true
+        self.for_each_pack_hit_with(&r, 0.0, t_max, |leaf, slot0, mask, u, v| {
+            self.attenuate(prepared, &mut att, cache, leaf, slot0, mask, u, v)
         });
         if att > 0.0 {
             // No opaque blocker: the next ray towards this light most likely passes too, so
@@ -67,6 +43,58 @@ impl SceneBvh {
             cache.leaf = EMPTY_SLOT;
         }
         att.max(0.0)
+    }
+
+    /// Whether an opaque triangle of the cache's leaf blocks the segment `0 < t < t_max`.
+    #[inline(always)]
+    pub(super) fn cache_blocks(&self, cache: &ShadowCache, r: &RayPre, t_max: f32) -> bool {
+        // A cache from another tree only costs time: any pack of this tree hit by an opaque lane
+        // is a true blocker.
+        if cache.leaf != EMPTY_SLOT && leaf_packs(cache.leaf).end <= self.packs.len() {
+            let range = leaf_packs(cache.leaf);
+            for (pack, &shadow) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]) {
+                let (_, _, _, hit) = intersect4(pack, r, 0.0, t_max);
+                if hit & (shadow as u32 >> 4) != 0 {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// Listing 8b's step at a pack hit (as [`SceneBvh::for_each_pack_hit`] reports it):
+    /// multiplies `att` by the transparency of each lane hit, or sets it to 0 (and `cache` to
+    /// `leaf`) at an opaque blocker; false once `att` is 0 (the ray is done).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn attenuate(
+        &self,
+        prepared: &PreparedScene,
+        att: &mut f32,
+        cache: &mut ShadowCache,
+        leaf: u32,
+        slot0: usize,
+        mut mask: u32,
+        u: [f32; 4],
+        v: [f32; 4],
+    ) -> bool {
+        if mask >> 4 != 0 {
+            // An opaque blocker.
+            cache.leaf = leaf;
+            *att = 0.0;
+            return false;
+        }
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize & 3;
+            mask &= mask - 1;
+            let tr = self.slot_shadow[slot0 + lane];
+            let tr = if tr == SHADOW_EVALUATE { self.textured_transparency(prepared, slot0 + lane, u[lane], v[lane]) } else { tr };
+            *att *= tr;
+            if *att <= 0.0 {
+                return false;
+            }
+        }
+        true
     }
 
     /// Shadow transparency (1 − opacity) of the slot's triangle at corner weights (1 − u − v,

@@ -21,6 +21,7 @@
 use super::*;
 use crate::bvh_core::STACK_LEN;
 use crate::isa;
+use hybrid_core::prepare::PreparedScene;
 
 /// Rays traced as one stream; longer inputs are cut into streams of this many. Longer streams
 /// share each node fetch among more rays, at the cost of larger per-thread lists (4 KiB a ray
@@ -30,6 +31,12 @@ pub const STREAM: usize = 4096;
 
 /// Lists of fewer rays than this leave the stream and finish one ray at a time.
 const SINGLE_RAYS_BELOW: usize = 8;
+
+/// Shadow rays that reach their light: how many of the next ones the cache does not block go
+/// into the stream before one is traced alone again (to find where a shadow begins, so the
+/// cache can take over). Higher values stream more of a lit region's rays, at the cost of
+/// traversals, not cache tests, for the first rays of each shadow.
+const PROBE_EVERY: usize = 8;
 
 /// Most node levels a stream's lists can be open on at once: a path is at most `MAX_DEPTH`
 /// (56) binary levels plus the ≤ 8 an oversized leaf adds, so at most 64 four-wide levels.
@@ -56,6 +63,10 @@ struct Scratch {
     rays: Vec<RayPre>,
     /// Each ray's closest hit so far.
     best: Vec<ClosestSoFar>,
+    /// Shadow rays: each ray's segment end, attenuation so far and opaque blocker.
+    t_max: Vec<f32>,
+    att: Vec<f32>,
+    blocker: Vec<ShadowCache>,
     lists: Vec<Listed>,
     visits: Vec<Visit>,
     single: [u64; STACK_LEN],
@@ -65,11 +76,22 @@ thread_local! {
     static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::new());
 }
 
+/// Runs `f` with this thread's scratch (a fresh one if it is in use further up the stack).
+fn with_scratch<R>(f: impl FnOnce(&mut Scratch) -> R) -> R {
+    SCRATCH.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut s) => f(&mut s),
+        Err(_) => f(&mut Scratch::new()),
+    })
+}
+
 impl Scratch {
     fn new() -> Self {
         Scratch {
             rays: Vec::with_capacity(STREAM),
             best: Vec::with_capacity(STREAM),
+            t_max: Vec::with_capacity(STREAM),
+            att: Vec::with_capacity(STREAM),
+            blocker: Vec::with_capacity(STREAM),
             // Zeroed memory from the system: only the pages written are ever touched.
             lists: vec![(0, 0.0); (LIST_LEVELS * 4 + 1) * STREAM],
             visits: Vec::with_capacity(LIST_LEVELS * 4),
@@ -90,16 +112,7 @@ impl SceneBvh {
         if self.nodes.is_empty() {
             return out;
         }
-        SCRATCH.with(|cell| {
-            let mut fresh;
-            let mut borrowed = cell.try_borrow_mut();
-            let scratch: &mut Scratch = match &mut borrowed {
-                Ok(s) => s,
-                Err(_) => {
-                    fresh = Scratch::new();
-                    &mut fresh
-                }
-            };
+        with_scratch(|scratch| {
             for (rays, out) in rays.chunks(STREAM).zip(out.chunks_mut(STREAM)) {
                 isa::dispatch(
                     #[inline(always)]
@@ -108,6 +121,151 @@ impl SceneBvh {
             }
         });
         out
+    }
+
+    /// Listing 8b for each ray `(origin, dir, t_max)`, as
+    /// [`any_hit_attenuation_cached`](Self::any_hit_attenuation_cached) would answer them one
+    /// after another with `cache` (rays towards one light, in pixel order). Rays go one at a
+    /// time while they are being blocked (the cache then ends most of them after one leaf
+    /// test); the rays of a lit run, which the cache cannot help, go out together as a ray
+    /// stream (after each lit ray traced alone, the next 8 that the cache does not block).
+    /// `cache` is left as the rays traced alone leave it. With no cache, every ray goes into
+    /// the stream (as [`any_hit_attenuation`](Self::any_hit_attenuation) would answer each).
+    ///
+    /// Attenuations are bit for bit the single rays' where a ray meets at most one
+    /// transparent shadow caster; where it meets several, their transparencies may be
+    /// multiplied in another order (a difference in the last bits).
+    pub fn any_hit_attenuation_stream(
+        &self,
+        prepared: &PreparedScene,
+        rays: &[(Vec3, Vec3, f32)],
+        mut cache: Option<&mut ShadowCache>,
+    ) -> Vec<f32> {
+        let mut out = vec![1.0; rays.len()];
+        if self.nodes.is_empty() {
+            return out;
+        }
+        with_scratch(|scratch| {
+            for (rays, out) in rays.chunks(STREAM).zip(out.chunks_mut(STREAM)) {
+                isa::dispatch(
+                    #[inline(always)]
+                    || self.shadow_stream_with(scratch, prepared, rays, cache.as_deref_mut(), out),
+                );
+            }
+        });
+        out
+    }
+
+    #[inline(always)]
+    fn shadow_stream_with(
+        &self,
+        s: &mut Scratch,
+        prepared: &PreparedScene,
+        rays: &[(Vec3, Vec3, f32)],
+        cache: Option<&mut ShadowCache>,
+        out: &mut [f32],
+    ) {
+        s.rays.clear();
+        s.rays.extend(rays.iter().map(|&(o, d, _)| RayPre::new(Vec3A::from(o), Vec3A::from(d))));
+        s.t_max.clear();
+        s.t_max.extend(rays.iter().map(|r| r.2));
+        s.att.clear();
+        s.att.resize(rays.len(), 1.0);
+        s.blocker.clear();
+        s.blocker.resize(rays.len(), ShadowCache::default());
+        let (pre, t_max, att, lists) = (&s.rays, &s.t_max, &mut s.att, &mut s.lists);
+        // One ray at a time first, in order, as `any_hit_attenuation_cached` does: the cached
+        // blocker, and where it does not block, either a traversal of the ray's own or a place
+        // in the stream. Where rays are being blocked (the cache or the last traversal found a
+        // blocker), they keep to their own traversals, which move the cache onto each new
+        // blocker; where they reach the light, the next `PROBE_EVERY` rays the cache misses go
+        // into the stream, then one traverses alone again to see whether a shadow begins.
+        let mut n = 0;
+        let mut lit_run: Option<usize> = None;
+        let Some(cache) = cache else {
+            // No cache: every ray in the stream.
+            for (id, l) in lists[..rays.len()].iter_mut().enumerate() {
+                *l = (id as u32, 0.0);
+            }
+            n = rays.len();
+            return self.shadow_stream_walk(s, prepared, n, out);
+        };
+        for (id, r) in pre.iter().enumerate() {
+            if self.cache_blocks(cache, r, t_max[id]) {
+                att[id] = 0.0;
+                lit_run = None;
+            } else if let Some(run) = lit_run.filter(|&run| run < PROBE_EVERY) {
+                lists[n] = (id as u32, 0.0);
+                n += 1;
+                lit_run = Some(run + 1);
+            } else {
+                let a = &mut att[id];
+                self.for_each_pack_hit_from(r, 0.0, t_max[id], 0, |leaf, slot0, mask, u, v| {
+                    self.attenuate(prepared, a, cache, leaf, slot0, mask, u, v)
+                });
+                if *a > 0.0 {
+                    *cache = ShadowCache::default();
+                    lit_run = Some(0);
+                } else {
+                    lit_run = None;
+                }
+            }
+        }
+        self.shadow_stream_walk(s, prepared, n, out);
+    }
+
+    /// The stream walk of the shadow rays `s.lists[..n]` (prepared in `s`), then every ray's
+    /// attenuation into `out`.
+    #[inline(always)]
+    fn shadow_stream_walk(&self, s: &mut Scratch, prepared: &PreparedScene, n: usize, out: &mut [f32]) {
+        let (pre, t_max, att, blocker, lists) = (&s.rays, &s.t_max, &mut s.att, &mut s.blocker, &mut s.lists);
+        s.visits.clear();
+        if n > 0 {
+            s.visits.push(Visit { node: 0, start: 0, len: n as u32, end: n as u32 });
+        }
+        while let Some(v) = s.visits.pop() {
+            let (start, len) = (v.start as usize, v.len as usize);
+            if v.node & LEAF != 0 || len < SINGLE_RAYS_BELOW {
+                for &(id, _) in &lists[start..start + len] {
+                    let id = id as usize;
+                    if att[id] > 0.0 {
+                        let (a, b) = (&mut att[id], &mut blocker[id]);
+                        let mut step = |leaf, slot0, mask, u, v| self.attenuate(prepared, a, b, leaf, slot0, mask, u, v);
+                        if v.node & LEAF != 0 {
+                            self.leaf_pack_hits(v.node, &pre[id], 0.0, t_max[id], &mut step);
+                        } else {
+                            self.for_each_pack_hit_from(&pre[id], 0.0, t_max[id], v.node, step);
+                        }
+                    }
+                }
+                continue;
+            }
+            let base = v.end as usize;
+            let node = &self.nodes[v.node as usize];
+            let (below, above) = lists.split_at_mut(base);
+            let child_lists = &mut above[..4 * len];
+            let mut counts = [0usize; 4];
+            for &(id, _) in &below[start..start + len] {
+                if att[id as usize] <= 0.0 {
+                    continue;
+                }
+                let (_, mask) = node_hits(node, &pre[id as usize], 0.0, t_max[id as usize]);
+                for (k, count) in counts.iter_mut().enumerate() {
+                    child_lists[k * len + *count] = (id, 0.0);
+                    *count += (mask >> k & 1) as usize;
+                }
+            }
+            // Children in index order (the last pushed is taken first).
+            let end = (base + 4 * len) as u32;
+            for k in (0..4).rev() {
+                if counts[k] > 0 {
+                    s.visits.push(Visit { node: node.child[k], start: (base + k * len) as u32, len: counts[k] as u32, end });
+                }
+            }
+        }
+        for (o, &a) in out.iter_mut().zip(att.iter()) {
+            *o = a.max(0.0);
+        }
     }
 
     #[inline(always)]

@@ -127,15 +127,29 @@ impl SceneBvh {
         r: &RayPre,
         t_min: f32,
         t_max: f32,
-        mut f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
+        f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
     ) {
+        self.for_each_pack_hit_from(r, t_min, t_max, 0, f);
+    }
+
+    /// [`for_each_pack_hit`](Self::for_each_pack_hit) in the subtree of `start` (a node
+    /// index or a leaf reference); returns false if `f` stopped the walk.
+    #[inline(always)]
+    pub(super) fn for_each_pack_hit_from(
+        &self,
+        r: &RayPre,
+        t_min: f32,
+        t_max: f32,
+        start: u32,
+        mut f: impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
+    ) -> bool {
         // The nodes still to visit are `stack[..sp]`: a fixed array indexed modulo its
         // power-of-two length, so that no bounds or capacity check sits in the loop (a `Vec`'s
         // push and pop were measurably slower). It cannot fill: see `STACK_LEN`.
         let mut stack = [0u32; TRI_STACK_LEN];
         const WRAP: usize = TRI_STACK_LEN - 1;
         let mut sp = 0usize;
-        let mut cur = 0u32;
+        let mut cur = start;
         loop {
             if cur & LEAF == 0 {
                 let n = &self.nodes[cur as usize];
@@ -151,27 +165,43 @@ impl SceneBvh {
                     }
                     continue;
                 }
-            } else {
-                let range = leaf_packs(cur);
-                let first = range.start;
-                for (k, (pack, &shadow)) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]).enumerate() {
-                    let (_, u, v, hit) = intersect4(pack, r, t_min, t_max);
-                    let hit = hit & shadow as u32 & 15;
-                    if hit != 0 {
-                        let opaque = hit & (shadow as u32 >> 4);
-                        let mask = if opaque != 0 { opaque << 4 } else { hit };
-                        if !f(cur, (first + k) * 4, mask, u.to_array(), v.to_array()) {
-                            return;
-                        }
-                    }
-                }
+            } else if !self.leaf_pack_hits(cur, r, t_min, t_max, &mut f) {
+                return false;
             }
             if sp == 0 {
-                return;
+                return true;
             }
             sp -= 1;
             cur = stack[sp & WRAP];
         }
+    }
+
+    /// The any-hit walk's leaf: calls `f` (as [`for_each_pack_hit`](Self::for_each_pack_hit)
+    /// does) for each pack of `leaf` with triangles hit that can block light; false if `f`
+    /// stopped.
+    #[inline(always)]
+    pub(super) fn leaf_pack_hits(
+        &self,
+        leaf: u32,
+        r: &RayPre,
+        t_min: f32,
+        t_max: f32,
+        f: &mut impl FnMut(u32, usize, u32, [f32; 4], [f32; 4]) -> bool,
+    ) -> bool {
+        let range = leaf_packs(leaf);
+        let first = range.start;
+        for (k, (pack, &shadow)) in self.packs[range.clone()].iter().zip(&self.pack_shadow[range]).enumerate() {
+            let (_, u, v, hit) = intersect4(pack, r, t_min, t_max);
+            let hit = hit & shadow as u32 & 15;
+            if hit != 0 {
+                let opaque = hit & (shadow as u32 >> 4);
+                let mask = if opaque != 0 { opaque << 4 } else { hit };
+                if !f(leaf, (first + k) * 4, mask, u.to_array(), v.to_array()) {
+                    return false;
+                }
+            }
+        }
+        true
     }
 }
 
