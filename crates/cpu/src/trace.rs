@@ -32,6 +32,11 @@
 //! Ray origins are offset by `scene.trace.ray_bias` along the normal, on the side the new ray
 //! leaves from (so refraction rays entering glass start inside it). Pixels are independent, so
 //! the output is bit-identical for any thread count.
+//!
+//! Work items of [`STREAM`] pixels trace their rays in ray streams (`SceneBvh`'s
+//! `closest_hits_stream` and `any_hit_attenuation_stream`): first each light's shadow rays and
+//! the first reflection and refraction rays, then each pixel is finished in order with those
+//! answers (the rays below the first ones one at a time).
 
 use glam::{Vec2, Vec3};
 use hybrid_core::blend::combine;
@@ -137,21 +142,54 @@ pub fn trace_with_spheres_into(
                 .collect();
             let hits = bvh.closest_hits_stream(&first_rays, 0.0, f32::INFINITY);
             let mut first_hits = hits.into_iter();
+            // Each light's shadow rays of the chunk together too (with the light's cache), in
+            // pixel order: `ShadowRays` per light, walked along with the pixels below.
+            let mut shadow_hits: Vec<ShadowRays> = lights(&prepared.scene.lights)
+                .zip(caches.iter_mut())
+                .enumerate()
+                .map(|(light, (l, cache))| {
+                    let (mut pixels, mut rays, mut radiance) = (Vec::new(), Vec::new(), Vec::new());
+                    if l.casts_shadows() {
+                        for (k, (surface, incident)) in surfaces.iter().enumerate().filter_map(|(k, s)| Some((k, s.as_ref()?))) {
+                            if let Some((origin, dir, dist, rad)) = tracer.shadow_ray(surface, -*incident, light) {
+                                pixels.push(k as u32);
+                                rays.push((origin, dir, dist));
+                                radiance.push(rad);
+                            }
+                        }
+                    }
+                    let attenuation = bvh.any_hit_attenuation_stream(prepared, &rays, Some(cache));
+                    ShadowRays { pixels, rays, radiance, attenuation, next: 0 }
+                })
+                .collect();
             for (k, surface) in surfaces.iter().enumerate() {
                 let i = c * CHUNK + k;
                 (s[k], m[k], r[k]) = if gbuffer.mask[i] > 0.0 {
-                    tracer.pixel(gbuffer, i, surface.as_ref(), &mut first_hits, &mut caches, &mut rays)
+                    tracer.pixel(gbuffer, i, k as u32, surface.as_ref(), &mut first_hits, &mut shadow_hits, &mut rays)
                 } else {
                     (Vec3::ONE, Vec3::ZERO, Vec3::ZERO)
                 };
             }
             debug_assert!(first_hits.next().is_none(), "every streamed hit is used");
+            debug_assert!(shadow_hits.iter().all(|l| l.next == l.pixels.len()), "every shadow ray is used");
             rays
         })
         .reduce(RayCounts::default, |mut a, b| {
             a += b;
             a
         })
+}
+
+/// One light's shadow rays of a work item, in pixel order: the pixel (its number in the work
+/// item) each starts from, the ray `(origin, dir, distance)`, the light's radiance there and
+/// the triangles' attenuation ([`SceneBvh::any_hit_attenuation_stream`]); `next` is the first
+/// not yet used.
+struct ShadowRays {
+    pixels: Vec<u32>,
+    rays: Vec<(Vec3, Vec3, f32)>,
+    radiance: Vec<Vec3>,
+    attenuation: Vec<f32>,
+    next: usize,
 }
 
 #[derive(Clone, Copy)]
@@ -183,15 +221,17 @@ impl Tracer<'_, '_> {
     /// Listing 8a for pixel `i`, whose surface and view direction are `surface`
     /// ([`Tracer::surface`]): (shadow, reflection, refraction). `first_hits` yields the
     /// closest triangle hits of the pixel's first reflection and refraction rays
-    /// ([`Tracer::first_rays`], in that order), traced beforehand. `caches` holds one shadow
-    /// cache per light, carried from pixel to pixel.
+    /// ([`Tracer::first_rays`], in that order), traced beforehand; `shadow_hits[light]` the
+    /// shadow rays of each light, likewise, where this pixel is number `k` of its work item.
+    #[allow(clippy::too_many_arguments)]
     fn pixel(
         &self,
         g: &GBuffer,
         i: usize,
+        k: u32,
         surface: Option<&(Surface, Vec3)>,
         first_hits: &mut impl Iterator<Item = Option<Hit>>,
-        caches: &mut [ShadowCache],
+        shadow_hits: &mut [ShadowRays],
         rays: &mut RayCounts,
     ) -> (Vec3, Vec3, Vec3) {
         let scene = self.prepared.scene;
@@ -210,7 +250,7 @@ impl Tracer<'_, '_> {
             }
             None => Vec3::ZERO,
         };
-        let shadow = self.shadow_rays(&s, view, caches, rays);
+        let shadow = self.shadow_rays(&s, view, k, shadow_hits, rays);
         let reflection = traced(refl, s.reflectivity, Kind::Reflection, rays);
         let refraction = traced(refr, 1.0 - s.opacity, Kind::Refraction, rays);
         (shadow, reflection, refraction)
@@ -233,27 +273,37 @@ impl Tracer<'_, '_> {
         [reflection, refraction]
     }
 
-    /// Listing 8a's shadows for surface `s` seen along `view`: 1 minus the Blinn–Phong light of
-    /// each shadow-casting light that occluders block (× 1 − their attenuation, listing 8b).
+    /// Light `light`'s shadow ray from surface `s` seen along `view` (the light casting
+    /// shadows), as `(origin, dir, distance, radiance)`; `None` where the light cannot change
+    /// the pixel: the surface has no diffuse or specular colour, no radiance arrives, or the
+    /// light is behind the surface (the cheap half of Blinn–Phong; the full term is evaluated
+    /// only where the ray finds a blocker).
     #[inline]
-    fn shadow_rays(&self, s: &Surface, view: Vec3, caches: &mut [ShadowCache], rays: &mut RayCounts) -> Vec3 {
-        let scene = self.prepared.scene;
+    fn shadow_ray(&self, s: &Surface, view: Vec3, light: usize) -> Option<(Vec3, Vec3, f32, Vec3)> {
+        if s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO {
+            return None;
+        }
+        let (dir, dist, radiance) = self.frame_lights.incident_and_distance(light, s.position);
+        if radiance == Vec3::ZERO || facing(s.normal, view).dot(dir) <= 0.0 {
+            return None;
+        }
+        Some((self.offset(s, dir), dir, dist, radiance))
+    }
+
+    /// Listing 8a's shadows for surface `s` (pixel `k` of its work item) seen along `view`: 1
+    /// minus the Blinn–Phong light of each shadow-casting light that occluders block (× 1 −
+    /// their attenuation, listing 8b). The triangles' attenuations come from `shadow_hits`,
+    /// traced beforehand; the RT scene's spheres are tested here.
+    #[inline]
+    fn shadow_rays(&self, s: &Surface, view: Vec3, k: u32, shadow_hits: &mut [ShadowRays], rays: &mut RayCounts) -> Vec3 {
         let mut shadow = Vec3::ONE;
-        let unlit = s.diffuse == Vec3::ZERO && s.specular == Vec3::ZERO;
-        for (k, (light, cache)) in lights(&scene.lights).zip(caches.iter_mut()).enumerate() {
-            if !light.casts_shadows() || unlit {
+        for l in shadow_hits.iter_mut() {
+            if l.pixels.get(l.next) != Some(&k) {
                 continue;
             }
-            // The cheap half of Blinn–Phong first (no radiance, or the light behind the
-            // surface: it contributes nothing, so no ray); the full term only where the ray
-            // finds a blocker.
-            let (dir, dist, radiance) = self.frame_lights.incident_and_distance(k, s.position);
-            if radiance == Vec3::ZERO || facing(s.normal, view).dot(dir) <= 0.0 {
-                continue;
-            }
+            let ((origin, dir, dist), radiance, mut att) = (l.rays[l.next], l.radiance[l.next], l.attenuation[l.next]);
+            l.next += 1;
             rays.shadow += 1;
-            let origin = self.offset(s, dir);
-            let mut att = self.bvh.any_hit_attenuation_cached(self.prepared, origin, dir, dist, cache);
             if att > 0.0 && self.spheres.is_some_and(|c| c.occluded(origin, dir, 0.0, dist)) {
                 att = 0.0;
             }
