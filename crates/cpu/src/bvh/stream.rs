@@ -19,7 +19,7 @@
 //! none of the Embree bench's 918K). The answer never depends on the thread count.
 
 use super::*;
-use crate::bvh_core::STACK_LEN;
+use crate::bvh_core::{Node4, STACK_LEN};
 use crate::isa;
 use hybrid_core::prepare::PreparedScene;
 
@@ -53,6 +53,37 @@ struct Visit {
     end: u32,
 }
 
+/// A ray as a box test needs it: origin, inverse direction and the planes it enters and leaves
+/// each slab by (as in `RayPre`).
+#[derive(Clone, Copy)]
+#[repr(align(32))]
+struct NodeRay {
+    o: [f32; 3],
+    inv: [f32; 3],
+    near: [u8; 3],
+    far: [u8; 3],
+}
+
+impl NodeRay {
+    #[inline(always)]
+    fn of(r: &RayPre) -> Self {
+        NodeRay { o: r.o.map(|v| v.x), inv: r.inv.map(|v| v.x), near: r.near.map(|i| i as u8), far: r.far.map(|i| i as u8) }
+    }
+
+    /// [`node_hits`] of this ray, the same operations in the same order (so the same bits).
+    #[inline(always)]
+    fn hits(&self, n: &Node4, t_min: f32, t_max: f32) -> (Vec4, u32) {
+        let mut near = Vec4::splat(t_min);
+        let mut far = Vec4::splat(t_max);
+        for axis in 0..3 {
+            let (o, inv) = (Vec4::splat(self.o[axis]), Vec4::splat(self.inv[axis]));
+            near = near.max((n.planes[self.near[axis] as usize] - o) * inv);
+            far = far.min((n.planes[self.far[axis] as usize] - o) * inv);
+        }
+        (near, near.cmple(far).bitmask())
+    }
+}
+
 /// A ray in a list: its index in the stream and its entry distance into the list's box.
 type Listed = (u32, f32);
 
@@ -61,8 +92,12 @@ type Listed = (u32, f32);
 struct Scratch {
     /// The stream's rays, prepared for box tests.
     rays: Vec<RayPre>,
-    /// Each ray's closest hit so far.
+    /// The same rays, only what a box test needs (32 bytes a ray instead of 192, so that a
+    /// stream's stay in the L1/L2 caches).
+    node_rays: Vec<NodeRay>,
+    /// Each ray's closest hit so far, and its distance alone (read at every box test).
     best: Vec<ClosestSoFar>,
+    best_t: Vec<f32>,
     /// Shadow rays: each ray's segment end, attenuation so far and opaque blocker.
     t_max: Vec<f32>,
     att: Vec<f32>,
@@ -88,7 +123,9 @@ impl Scratch {
     fn new() -> Self {
         Scratch {
             rays: Vec::with_capacity(STREAM),
+            node_rays: Vec::with_capacity(STREAM),
             best: Vec::with_capacity(STREAM),
+            best_t: Vec::with_capacity(STREAM),
             t_max: Vec::with_capacity(STREAM),
             att: Vec::with_capacity(STREAM),
             blocker: Vec::with_capacity(STREAM),
@@ -218,7 +255,9 @@ impl SceneBvh {
     /// attenuation into `out`.
     #[inline(always)]
     fn shadow_stream_walk(&self, s: &mut Scratch, prepared: &PreparedScene, n: usize, out: &mut [f32]) {
-        let (pre, t_max, att, blocker, lists) = (&s.rays, &s.t_max, &mut s.att, &mut s.blocker, &mut s.lists);
+        s.node_rays.clear();
+        s.node_rays.extend(s.rays.iter().map(NodeRay::of));
+        let (pre, node_rays, t_max, att, blocker, lists) = (&s.rays, &s.node_rays, &s.t_max, &mut s.att, &mut s.blocker, &mut s.lists);
         s.visits.clear();
         if n > 0 {
             s.visits.push(Visit { node: 0, start: 0, len: n as u32, end: n as u32 });
@@ -249,7 +288,7 @@ impl SceneBvh {
                 if att[id as usize] <= 0.0 {
                     continue;
                 }
-                let (_, mask) = node_hits(node, &pre[id as usize], 0.0, t_max[id as usize]);
+                let (_, mask) = node_rays[id as usize].hits(node, 0.0, t_max[id as usize]);
                 for (k, count) in counts.iter_mut().enumerate() {
                     child_lists[k * len + *count] = (id, 0.0);
                     *count += (mask >> k & 1) as usize;
@@ -273,9 +312,13 @@ impl SceneBvh {
         let n = rays.len();
         s.rays.clear();
         s.rays.extend(rays.iter().map(|&(o, d)| RayPre::new(Vec3A::from(o), Vec3A::from(d))));
+        s.node_rays.clear();
+        s.node_rays.extend(s.rays.iter().map(NodeRay::of));
         s.best.clear();
         s.best.resize(n, ClosestSoFar { t: t_max, slot: 0, uv: (0.0, 0.0) });
-        let (pre, best) = (&s.rays, &mut s.best);
+        s.best_t.clear();
+        s.best_t.resize(n, t_max);
+        let (pre, node_rays, best, best_t) = (&s.rays, &s.node_rays, &mut s.best, &mut s.best_t);
         let lists = &mut s.lists;
         for (i, l) in lists[..n].iter_mut().enumerate() {
             *l = (i as u32, t_min);
@@ -289,6 +332,7 @@ impl SceneBvh {
                     let b = &mut best[id as usize];
                     if near <= b.t {
                         b.t = self.leaf_closest(v.node, &pre[id as usize], t_min, b.t, &mut b.slot, &mut b.uv);
+                        best_t[id as usize] = b.t;
                     }
                 }
                 continue;
@@ -298,6 +342,7 @@ impl SceneBvh {
                     let b = &mut best[id as usize];
                     if near <= b.t {
                         self.closest_from(&mut s.single, &pre[id as usize], t_min, v.node, b);
+                        best_t[id as usize] = b.t;
                     }
                 }
                 continue;
@@ -310,11 +355,11 @@ impl SceneBvh {
             let mut counts = [0usize; 4];
             let mut near_sum = [0.0f32; 4];
             for &(id, near) in &below[start..start + len] {
-                let b = &best[id as usize];
-                if near > b.t {
+                let t = best_t[id as usize];
+                if near > t {
                     continue;
                 }
-                let (near, mask) = node_hits(node, &pre[id as usize], t_min, b.t);
+                let (near, mask) = node_rays[id as usize].hits(node, t_min, t);
                 let near = near.to_array();
                 for k in 0..4 {
                     let entered = mask >> k & 1 != 0;
