@@ -53,12 +53,15 @@ struct Visit {
     end: u32,
 }
 
-/// A ray as a box test needs it: origin, inverse direction and the planes it enters and leaves
-/// each slab by (as in `RayPre`).
+/// A stream's ray, compact (48 bytes, where a `RayPre` takes 192, so that a stream's rays stay
+/// in the L1/L2 caches): origin, direction, inverse direction and the planes it enters and
+/// leaves each slab by, as `RayPre::new` has them; [`NodeRay::pre`] expands it for the leaf
+/// tests and the single-ray walk.
 #[derive(Clone, Copy)]
-#[repr(align(32))]
+#[repr(align(16))]
 struct NodeRay {
     o: [f32; 3],
+    d: [f32; 3],
     inv: [f32; 3],
     near: [u8; 3],
     far: [u8; 3],
@@ -66,8 +69,27 @@ struct NodeRay {
 
 impl NodeRay {
     #[inline(always)]
-    fn of(r: &RayPre) -> Self {
-        NodeRay { o: r.o.map(|v| v.x), inv: r.inv.map(|v| v.x), near: r.near.map(|i| i as u8), far: r.far.map(|i| i as u8) }
+    fn new(o: Vec3, d: Vec3) -> Self {
+        let r = RayPre::new(Vec3A::from(o), Vec3A::from(d));
+        NodeRay {
+            o: r.o.map(|v| v.x),
+            d: r.d.map(|v| v.x),
+            inv: r.inv.map(|v| v.x),
+            near: r.near.map(|i| i as u8),
+            far: r.far.map(|i| i as u8),
+        }
+    }
+
+    /// The ray as `RayPre::new` makes it (the same values).
+    #[inline(always)]
+    fn pre(&self) -> RayPre {
+        RayPre {
+            o: self.o.map(Vec4::splat),
+            d: self.d.map(Vec4::splat),
+            inv: self.inv.map(Vec4::splat),
+            near: self.near.map(usize::from),
+            far: self.far.map(usize::from),
+        }
     }
 
     /// [`node_hits`] of this ray, the same operations in the same order (so the same bits).
@@ -90,8 +112,6 @@ type Listed = (u32, f32);
 /// Per-thread scratch of the stream traversal, kept from stream to stream (too large to zero
 /// for each).
 struct Scratch {
-    /// The stream's rays, prepared for box tests.
-    rays: Vec<RayPre>,
     /// The same rays, only what a box test needs (32 bytes a ray instead of 192, so that a
     /// stream's stay in the L1/L2 caches).
     node_rays: Vec<NodeRay>,
@@ -122,7 +142,6 @@ fn with_scratch<R>(f: impl FnOnce(&mut Scratch) -> R) -> R {
 impl Scratch {
     fn new() -> Self {
         Scratch {
-            rays: Vec::with_capacity(STREAM),
             node_rays: Vec::with_capacity(STREAM),
             best: Vec::with_capacity(STREAM),
             best_t: Vec::with_capacity(STREAM),
@@ -202,15 +221,15 @@ impl SceneBvh {
         cache: Option<&mut ShadowCache>,
         out: &mut [f32],
     ) {
-        s.rays.clear();
-        s.rays.extend(rays.iter().map(|&(o, d, _)| RayPre::new(Vec3A::from(o), Vec3A::from(d))));
+        s.node_rays.clear();
+        s.node_rays.extend(rays.iter().map(|&(o, d, _)| NodeRay::new(o, d)));
         s.t_max.clear();
         s.t_max.extend(rays.iter().map(|r| r.2));
         s.att.clear();
         s.att.resize(rays.len(), 1.0);
         s.blocker.clear();
         s.blocker.resize(rays.len(), ShadowCache::default());
-        let (pre, t_max, att, lists) = (&s.rays, &s.t_max, &mut s.att, &mut s.lists);
+        let (node_rays, t_max, att, lists) = (&s.node_rays, &s.t_max, &mut s.att, &mut s.lists);
         // One ray at a time first, in order, as `any_hit_attenuation_cached` does: the cached
         // blocker, and where it does not block, either a traversal of the ray's own or a place
         // in the stream. Where rays are being blocked (the cache or the last traversal found a
@@ -227,8 +246,8 @@ impl SceneBvh {
             n = rays.len();
             return self.shadow_stream_walk(s, prepared, n, out);
         };
-        for (id, r) in pre.iter().enumerate() {
-            if self.cache_blocks(cache, r, t_max[id]) {
+        for (id, r) in node_rays.iter().map(NodeRay::pre).enumerate() {
+            if self.cache_blocks(cache, &r, t_max[id]) {
                 att[id] = 0.0;
                 lit_run = None;
             } else if let Some(run) = lit_run.filter(|&run| run < PROBE_EVERY) {
@@ -237,7 +256,7 @@ impl SceneBvh {
                 lit_run = Some(run + 1);
             } else {
                 let a = &mut att[id];
-                self.for_each_pack_hit_from(r, 0.0, t_max[id], 0, |leaf, slot0, mask, u, v| {
+                self.for_each_pack_hit_from(&r, 0.0, t_max[id], 0, |leaf, slot0, mask, u, v| {
                     self.attenuate(prepared, a, cache, leaf, slot0, mask, u, v)
                 });
                 if *a > 0.0 {
@@ -255,9 +274,7 @@ impl SceneBvh {
     /// attenuation into `out`.
     #[inline(always)]
     fn shadow_stream_walk(&self, s: &mut Scratch, prepared: &PreparedScene, n: usize, out: &mut [f32]) {
-        s.node_rays.clear();
-        s.node_rays.extend(s.rays.iter().map(NodeRay::of));
-        let (pre, node_rays, t_max, att, blocker, lists) = (&s.rays, &s.node_rays, &s.t_max, &mut s.att, &mut s.blocker, &mut s.lists);
+        let (node_rays, t_max, att, blocker, lists) = (&s.node_rays, &s.t_max, &mut s.att, &mut s.blocker, &mut s.lists);
         s.visits.clear();
         if n > 0 {
             s.visits.push(Visit { node: 0, start: 0, len: n as u32, end: n as u32 });
@@ -271,9 +288,9 @@ impl SceneBvh {
                         let (a, b) = (&mut att[id], &mut blocker[id]);
                         let mut step = |leaf, slot0, mask, u, v| self.attenuate(prepared, a, b, leaf, slot0, mask, u, v);
                         if v.node & LEAF != 0 {
-                            self.leaf_pack_hits(v.node, &pre[id], 0.0, t_max[id], &mut step);
+                            self.leaf_pack_hits(v.node, &node_rays[id].pre(), 0.0, t_max[id], &mut step);
                         } else {
-                            self.for_each_pack_hit_from(&pre[id], 0.0, t_max[id], v.node, step);
+                            self.for_each_pack_hit_from(&node_rays[id].pre(), 0.0, t_max[id], v.node, step);
                         }
                     }
                 }
@@ -310,15 +327,13 @@ impl SceneBvh {
     #[inline(always)]
     fn stream_with(&self, s: &mut Scratch, rays: &[(Vec3, Vec3)], t_min: f32, t_max: f32, out: &mut [Option<Hit>]) {
         let n = rays.len();
-        s.rays.clear();
-        s.rays.extend(rays.iter().map(|&(o, d)| RayPre::new(Vec3A::from(o), Vec3A::from(d))));
         s.node_rays.clear();
-        s.node_rays.extend(s.rays.iter().map(NodeRay::of));
+        s.node_rays.extend(rays.iter().map(|&(o, d)| NodeRay::new(o, d)));
         s.best.clear();
         s.best.resize(n, ClosestSoFar { t: t_max, slot: 0, uv: (0.0, 0.0) });
         s.best_t.clear();
         s.best_t.resize(n, t_max);
-        let (pre, node_rays, best, best_t) = (&s.rays, &s.node_rays, &mut s.best, &mut s.best_t);
+        let (node_rays, best, best_t) = (&s.node_rays, &mut s.best, &mut s.best_t);
         let lists = &mut s.lists;
         for (i, l) in lists[..n].iter_mut().enumerate() {
             *l = (i as u32, t_min);
@@ -331,7 +346,7 @@ impl SceneBvh {
                 for &(id, near) in &lists[start..start + len] {
                     let b = &mut best[id as usize];
                     if near <= b.t {
-                        b.t = self.leaf_closest(v.node, &pre[id as usize], t_min, b.t, &mut b.slot, &mut b.uv);
+                        b.t = self.leaf_closest(v.node, &node_rays[id as usize].pre(), t_min, b.t, &mut b.slot, &mut b.uv);
                         best_t[id as usize] = b.t;
                     }
                 }
@@ -341,7 +356,7 @@ impl SceneBvh {
                 for &(id, near) in &lists[start..start + len] {
                     let b = &mut best[id as usize];
                     if near <= b.t {
-                        self.closest_from(&mut s.single, &pre[id as usize], t_min, v.node, b);
+                        self.closest_from(&mut s.single, &node_rays[id as usize].pre(), t_min, v.node, b);
                         best_t[id as usize] = b.t;
                     }
                 }
