@@ -89,11 +89,26 @@ impl RayPre {
 /// `[t_min, t_max]`.
 #[inline(always)]
 fn node_hits(n: &Node4, r: &RayPre, t_min: f32, t_max: f32) -> (Vec4, u32) {
+    slab_hits(n, r.o, r.inv, r.near, r.far, t_min, t_max)
+}
+
+/// [`node_hits`] from the ray's parts: origin and inverse direction splatted per axis, and the
+/// planes entered and left on each axis (one body, so every caller gets the same bits).
+#[inline(always)]
+fn slab_hits(
+    n: &Node4,
+    o: [Vec4; 3],
+    inv: [Vec4; 3],
+    near_plane: [usize; 3],
+    far_plane: [usize; 3],
+    t_min: f32,
+    t_max: f32,
+) -> (Vec4, u32) {
     let mut near = Vec4::splat(t_min);
     let mut far = Vec4::splat(t_max);
     for axis in 0..3 {
-        near = near.max((n.planes[r.near[axis]] - r.o[axis]) * r.inv[axis]);
-        far = far.min((n.planes[r.far[axis]] - r.o[axis]) * r.inv[axis]);
+        near = near.max((n.planes[near_plane[axis]] - o[axis]) * inv[axis]);
+        far = far.min((n.planes[far_plane[axis]] - o[axis]) * inv[axis]);
     }
     (near, near.cmple(far).bitmask())
 }

@@ -92,17 +92,18 @@ impl NodeRay {
         }
     }
 
-    /// [`node_hits`] of this ray, the same operations in the same order (so the same bits).
+    /// [`node_hits`] of this ray (the same bits).
     #[inline(always)]
     fn hits(&self, n: &Node4, t_min: f32, t_max: f32) -> (Vec4, u32) {
-        let mut near = Vec4::splat(t_min);
-        let mut far = Vec4::splat(t_max);
-        for axis in 0..3 {
-            let (o, inv) = (Vec4::splat(self.o[axis]), Vec4::splat(self.inv[axis]));
-            near = near.max((n.planes[self.near[axis] as usize] - o) * inv);
-            far = far.min((n.planes[self.far[axis] as usize] - o) * inv);
-        }
-        (near, near.cmple(far).bitmask())
+        slab_hits(
+            n,
+            self.o.map(Vec4::splat),
+            self.inv.map(Vec4::splat),
+            self.near.map(usize::from),
+            self.far.map(usize::from),
+            t_min,
+            t_max,
+        )
     }
 }
 
@@ -129,6 +130,20 @@ struct Scratch {
 
 thread_local! {
     static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::new());
+}
+
+/// Runs `f` on each stream of `rays` (at most [`STREAM`] of them) and its part of `out`, with
+/// this thread's scratch, compiled for the instruction set in use.
+#[inline(always)]
+fn in_streams<R, O>(rays: &[R], out: &mut [O], mut f: impl FnMut(&mut Scratch, &[R], &mut [O])) {
+    with_scratch(|scratch| {
+        for (rays, out) in rays.chunks(STREAM).zip(out.chunks_mut(STREAM)) {
+            isa::dispatch(
+                #[inline(always)]
+                || f(scratch, rays, out),
+            );
+        }
+    });
 }
 
 /// Runs `f` with this thread's scratch (a fresh one if it is in use further up the stack).
@@ -168,14 +183,12 @@ impl SceneBvh {
         if self.nodes.is_empty() {
             return out;
         }
-        with_scratch(|scratch| {
-            for (rays, out) in rays.chunks(STREAM).zip(out.chunks_mut(STREAM)) {
-                isa::dispatch(
-                    #[inline(always)]
-                    || self.stream_with(scratch, rays, t_min, t_max, out),
-                );
-            }
-        });
+        in_streams(
+            rays,
+            &mut out,
+            #[inline(always)]
+            |scratch, rays, out| self.stream_with(scratch, rays, t_min, t_max, out),
+        );
         out
     }
 
@@ -201,14 +214,12 @@ impl SceneBvh {
         if self.nodes.is_empty() {
             return out;
         }
-        with_scratch(|scratch| {
-            for (rays, out) in rays.chunks(STREAM).zip(out.chunks_mut(STREAM)) {
-                isa::dispatch(
-                    #[inline(always)]
-                    || self.shadow_stream_with(scratch, prepared, rays, cache.as_deref_mut(), out),
-                );
-            }
-        });
+        in_streams(
+            rays,
+            &mut out,
+            #[inline(always)]
+            |scratch, rays, out| self.shadow_stream_with(scratch, prepared, rays, cache.as_deref_mut(), out),
+        );
         out
     }
 
