@@ -70,10 +70,14 @@ pub struct TraceOutput {
 /// thread's stack.
 pub use hybrid_scene::{MAX_TRACE_DEPTH, MAX_TRACED_DEPTH, TRACE_RAY_BUDGET};
 
-/// Pixels per parallel work item (uneven ray cost: items are handed out one at a time). Their
-/// first reflection and refraction rays form one ray stream, so the larger the chunk the more
-/// rays share each node fetch, at the cost of coarser load balancing between threads.
-const CHUNK: usize = STREAM;
+/// Pixels per parallel work item of a frame of `pixels` pixels (uneven ray cost: items are
+/// handed out one at a time). An item's rays form its ray streams, so the larger the item the
+/// more rays share each node fetch (up to [`STREAM`]), at the cost of coarser load balancing
+/// between threads: frames get at least 64 items (of at least 256 pixels). The size depends
+/// on the frame alone, so the output does not depend on the thread count.
+fn work_item_pixels(pixels: usize) -> usize {
+    (pixels / 64).clamp(256, STREAM)
+}
 
 /// Listing 8a over every pixel of `gbuffer` whose mask is > 0.
 pub fn trace(prepared: &PreparedScene, bvh: &SceneBvh, gbuffer: &GBuffer, camera: &Camera) -> TraceOutput {
@@ -117,10 +121,11 @@ pub fn trace_with_spheres_into(
         primary: PrimaryRays::new(camera, gbuffer.width, gbuffer.height),
         frame_lights: FrameLights::new(&prepared.scene.lights, &prepared.scene.environment),
     };
+    let chunk = work_item_pixels(n);
     shadow
-        .par_chunks_mut(CHUNK)
-        .zip(reflection.par_chunks_mut(CHUNK))
-        .zip(refraction.par_chunks_mut(CHUNK))
+        .par_chunks_mut(chunk)
+        .zip(reflection.par_chunks_mut(chunk))
+        .zip(refraction.par_chunks_mut(chunk))
         .enumerate()
         .with_max_len(1)
         .map(|(c, ((s, m), r))| {
@@ -130,7 +135,7 @@ pub fn trace_with_spheres_into(
             // pixel order (the hits one at a time would find, found faster); the rest of each
             // pixel's work, and the rays below those two, are traced pixel by pixel.
             let surfaces: Vec<Option<(Surface, Vec3)>> = (0..s.len())
-                .map(|k| (gbuffer.mask[c * CHUNK + k] > 0.0).then(|| tracer.surface(gbuffer, c * CHUNK + k)).flatten())
+                .map(|k| (gbuffer.mask[c * chunk + k] > 0.0).then(|| tracer.surface(gbuffer, c * chunk + k)).flatten())
                 .collect();
             let first_rays: Vec<(Vec3, Vec3)> = surfaces
                 .iter()
@@ -163,7 +168,7 @@ pub fn trace_with_spheres_into(
                 })
                 .collect();
             for (k, surface) in surfaces.iter().enumerate() {
-                let i = c * CHUNK + k;
+                let i = c * chunk + k;
                 (s[k], m[k], r[k]) = if gbuffer.mask[i] > 0.0 {
                     tracer.pixel(gbuffer, i, k as u32, surface.as_ref(), &mut first_hits, &mut shadow_hits, &mut rays)
                 } else {
@@ -478,4 +483,25 @@ fn uv_footprint(prepared: &PreparedScene, t: hybrid_core::prepare::TriangleRef, 
     let cos = (cross / world_area).dot(dir).abs().max(0.25);
     let f = world / cos * (uv_area / world_area).sqrt();
     if f.is_finite() { f } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn work_items_are_whole_streams_on_large_frames_and_many_on_small_ones() {
+        // 1280×720 and up: one full stream per item.
+        assert_eq!(work_item_pixels(1280 * 720), STREAM);
+        assert_eq!(work_item_pixels(3840 * 2160), STREAM);
+        // Smaller frames: at least 64 items, of at least 256 pixels.
+        assert_eq!(work_item_pixels(320 * 180), 900);
+        assert_eq!(work_item_pixels(160 * 90), 256);
+        assert_eq!(work_item_pixels(1), 256);
+        for pixels in [100, 10_000, 57_600, 200_000, 262_144, 262_207] {
+            let item = work_item_pixels(pixels);
+            assert!((256..=STREAM).contains(&item));
+            assert!(pixels.div_ceil(item) >= 64 || item == 256, "{pixels}: {item}");
+        }
+    }
 }
