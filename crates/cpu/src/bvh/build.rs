@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::bvh_core::build::{Bounds, BuildNode, BuildRules, BuildTree, Prim, PrimBounds, build};
-use crate::bvh_core::{LeafSink, collapse};
+use crate::bvh_core::{LeafSink, PARALLEL_COLLAPSE_LEVELS, collapse};
 
 /// Leaves are forced below this many triangles unless the centroids coincide.
 pub(super) const MAX_LEAF: usize = 8;
@@ -106,7 +106,7 @@ impl SceneBvh {
                 (nodes, packer)
             }
             Some(inner) => {
-                let c = collapse(&BuildTree::NEW, inner, COLLAPSE_LEVELS, 0, &new_packer);
+                let c = collapse(&BuildTree::NEW, inner, PARALLEL_COLLAPSE_LEVELS, &new_packer);
                 (c.nodes, c.sink)
             }
         };
@@ -157,10 +157,6 @@ impl SceneBvh {
         SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles, leaves }
     }
 }
-
-/// Levels of 4-wide nodes whose subtrees are collapsed in parallel (16 subtrees for two
-/// threads; the parallel collapse sizes its node array exactly, so no capacity is passed).
-const COLLAPSE_LEVELS: u32 = 2;
 
 impl<'a> LeafSink<&'a BuildNode> for Packer<'_> {
     fn leaf(&mut self, r: &'a BuildNode, nodes: &mut Vec<Node4>) -> u32 {

@@ -33,30 +33,33 @@ pub(crate) struct Collapsed<S> {
     pub(crate) sink: S,
 }
 
+/// Levels of 4-wide nodes whose subtrees the BVH builds collapse in parallel (up to 16 subtrees,
+/// enough for the threads of a small machine; each subtree's nodes are copied once more into
+/// place, so more levels only add copying).
+pub(crate) const PARALLEL_COLLAPSE_LEVELS: u32 = 2;
+
 /// The binary tree under `root` as 4-wide nodes, depth-first: each 4-wide node takes its binary
 /// node's two children and opens the inner child of largest surface area (the later one on a
 /// tie; its children take its place) until it has four or only leaves are left. The top
 /// `parallel_levels` levels of 4-wide nodes collapse their children's subtrees in parallel,
 /// each into its own nodes and sink (from `new_sink`), stitched after their parent: the same
-/// nodes in the same order as with none in parallel. A serial collapse reserves
-/// `node_capacity` nodes up front.
+/// nodes in the same order as with none in parallel.
 pub(crate) fn collapse<T: BinaryTree, S: LeafSink<T::Ref>>(
     tree: &T,
     root: T::Ref,
     parallel_levels: u32,
-    node_capacity: usize,
     new_sink: &(impl Fn() -> S + Sync),
 ) -> Collapsed<S> {
     use rayon::prelude::*;
     let kids = match open_kids(tree, root) {
         Some(kids) if parallel_levels > 0 => kids,
         _ => {
-            let (mut nodes, mut sink) = (Vec::with_capacity(node_capacity), new_sink());
+            let (mut nodes, mut sink) = (Vec::new(), new_sink());
             let root = collapse_into(tree, root, &mut nodes, &mut sink);
             return Collapsed { nodes, root, sink };
         }
     };
-    let subs: Vec<Collapsed<S>> = kids.par_iter().map(|&k| collapse(tree, k, parallel_levels - 1, 0, new_sink)).collect();
+    let subs: Vec<Collapsed<S>> = kids.par_iter().map(|&k| collapse(tree, k, parallel_levels - 1, new_sink)).collect();
     let mut nodes = Vec::with_capacity(1 + subs.iter().map(|s| s.nodes.len()).sum::<usize>());
     nodes.push(Node4::EMPTY);
     let mut node = Node4::EMPTY;
@@ -196,9 +199,9 @@ mod tests {
             .collect();
         let pb = PrimBounds::of(&prims);
         let tree = build(&rules, &mut prims, pb, 0, 0);
-        let serial = collapse(&BuildTree::NEW, &tree, 0, 0, &|| Positions(0));
+        let serial = collapse(&BuildTree::NEW, &tree, 0, &|| Positions(0));
         for levels in [1, 2, 3] {
-            let parallel = collapse(&BuildTree::NEW, &tree, levels, 0, &|| Positions(0));
+            let parallel = collapse(&BuildTree::NEW, &tree, levels, &|| Positions(0));
             assert_eq!((parallel.root, parallel.sink.0), (serial.root, serial.sink.0), "{levels} parallel levels");
             assert!(parallel.nodes == serial.nodes, "{levels} parallel levels: other nodes");
         }

@@ -11,7 +11,7 @@ use glam::{Vec3A, Vec4};
 pub(crate) mod build;
 mod collapse;
 
-pub(crate) use collapse::{BinaryTree, LeafSink, collapse};
+pub(crate) use collapse::{BinaryTree, LeafSink, PARALLEL_COLLAPSE_LEVELS, collapse};
 
 /// Set in a child reference that names a leaf; the rest of the bits are the leaf's own
 /// (`first << LEAF_COUNT_BITS | count bits`, see [`leaf_ref`]).

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 
 use super::*;
 use crate::bvh_core::build::{BuildNode, BuildRules, BuildTree, Prim, PrimBounds, build};
-use crate::bvh_core::{LeafSink, collapse};
+use crate::bvh_core::{LeafSink, PARALLEL_COLLAPSE_LEVELS, collapse};
 
 /// The sphere BVH's SAH: leaves of at most [`LEAF_MAX`] spheres (tested four at a time), bins
 /// along the widest axis only, and past depth 64 (pathological distributions) halving by count,
@@ -65,7 +65,7 @@ impl SphereBvh {
         } else {
             let pb = PrimBounds::of(&prims);
             let tree = build(&SPHERE_RULES, &mut prims, pb, 0, 0);
-            let c = collapse(&BuildTree::NEW, &tree, 2, 0, &|| SphereLeaves);
+            let c = collapse(&BuildTree::NEW, &tree, PARALLEL_COLLAPSE_LEVELS, &|| SphereLeaves);
             (c.nodes, c.root, Vec3::from(pb.bounds.min), Vec3::from(pb.bounds.max), Some(tree))
         };
         let axis = |a: usize| {
