@@ -33,7 +33,7 @@
 //! leaves from (so refraction rays entering glass start inside it). Pixels are independent, so
 //! the output is bit-identical for any thread count.
 //!
-//! Work items of [`STREAM`] pixels trace their rays in ray streams (`SceneBvh`'s
+//! Work items of up to [`STREAM`] pixels (sized by the frame) trace their rays in ray streams (`SceneBvh`'s
 //! `closest_hits_stream` and `any_hit_attenuation_stream`): first each light's shadow rays and
 //! the first reflection and refraction rays, then each pixel is finished in order with those
 //! answers (the rays below the first ones one at a time).

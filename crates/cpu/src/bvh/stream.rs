@@ -113,16 +113,14 @@ type Listed = (u32, f32);
 /// Per-thread scratch of the stream traversal, kept from stream to stream (too large to zero
 /// for each).
 struct Scratch {
-    /// The same rays, only what a box test needs (32 bytes a ray instead of 192, so that a
-    /// stream's stay in the L1/L2 caches).
+    /// The stream's rays.
     node_rays: Vec<NodeRay>,
     /// Each ray's closest hit so far, and its distance alone (read at every box test).
     best: Vec<ClosestSoFar>,
     best_t: Vec<f32>,
-    /// Shadow rays: each ray's segment end, attenuation so far and opaque blocker.
+    /// Shadow rays: each ray's segment end and attenuation so far.
     t_max: Vec<f32>,
     att: Vec<f32>,
-    blocker: Vec<ShadowCache>,
     lists: Vec<Listed>,
     visits: Vec<Visit>,
     single: [u64; STACK_LEN],
@@ -162,7 +160,6 @@ impl Scratch {
             best_t: Vec::with_capacity(STREAM),
             t_max: Vec::with_capacity(STREAM),
             att: Vec::with_capacity(STREAM),
-            blocker: Vec::with_capacity(STREAM),
             // Zeroed memory from the system: only the pages written are ever touched.
             lists: vec![(0, 0.0); (LIST_LEVELS * 4 + 1) * STREAM],
             visits: Vec::with_capacity(LIST_LEVELS * 4),
@@ -238,8 +235,6 @@ impl SceneBvh {
         s.t_max.extend(rays.iter().map(|r| r.2));
         s.att.clear();
         s.att.resize(rays.len(), 1.0);
-        s.blocker.clear();
-        s.blocker.resize(rays.len(), ShadowCache::default());
         let (node_rays, t_max, att, lists) = (&s.node_rays, &s.t_max, &mut s.att, &mut s.lists);
         // One ray at a time first, in order, as `any_hit_attenuation_cached` does: the cached
         // blocker, and where it does not block, either a traversal of the ray's own or a place
@@ -247,16 +242,15 @@ impl SceneBvh {
         // blocker), they keep to their own traversals, which move the cache onto each new
         // blocker; where they reach the light, the next `PROBE_EVERY` rays the cache misses go
         // into the stream, then one traverses alone again to see whether a shadow begins.
-        let mut n = 0;
-        let mut lit_run: Option<usize> = None;
         let Some(cache) = cache else {
             // No cache: every ray in the stream.
             for (id, l) in lists[..rays.len()].iter_mut().enumerate() {
                 *l = (id as u32, 0.0);
             }
-            n = rays.len();
-            return self.shadow_stream_walk(s, prepared, n, out);
+            return self.shadow_stream_walk(s, prepared, rays.len(), out);
         };
+        let mut n = 0;
+        let mut lit_run: Option<usize> = None;
         for (id, r) in node_rays.iter().map(NodeRay::pre).enumerate() {
             if self.cache_blocks(cache, &r, t_max[id]) {
                 att[id] = 0.0;
@@ -285,7 +279,10 @@ impl SceneBvh {
     /// attenuation into `out`.
     #[inline(always)]
     fn shadow_stream_walk(&self, s: &mut Scratch, prepared: &PreparedScene, n: usize, out: &mut [f32]) {
-        let (node_rays, t_max, att, blocker, lists) = (&s.node_rays, &s.t_max, &mut s.att, &mut s.blocker, &mut s.lists);
+        let (node_rays, t_max, att, lists) = (&s.node_rays, &s.t_max, &mut s.att, &mut s.lists);
+        // The blockers the stream finds are not kept (the caller's cache follows the rays
+        // traced alone), but `attenuate` records one.
+        let mut unused = ShadowCache::default();
         s.visits.clear();
         if n > 0 {
             s.visits.push(Visit { node: 0, start: 0, len: n as u32, end: n as u32 });
@@ -296,8 +293,8 @@ impl SceneBvh {
                 for &(id, _) in &lists[start..start + len] {
                     let id = id as usize;
                     if att[id] > 0.0 {
-                        let (a, b) = (&mut att[id], &mut blocker[id]);
-                        let mut step = |leaf, slot0, mask, u, v| self.attenuate(prepared, a, b, leaf, slot0, mask, u, v);
+                        let a = &mut att[id];
+                        let mut step = |leaf, slot0, mask, u, v| self.attenuate(prepared, a, &mut unused, leaf, slot0, mask, u, v);
                         if v.node & LEAF != 0 {
                             self.leaf_pack_hits(v.node, &node_rays[id].pre(), 0.0, t_max[id], &mut step);
                         } else {
