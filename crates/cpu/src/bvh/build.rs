@@ -1,10 +1,10 @@
-//! The triangle BVH's build: the core's binned SAH over all three axes with the triangles'
-//! rules ([`TRIANGLE_RULES`]), then the core's collapse into 4-wide nodes with leaf packs.
+//! The triangle BVH's build: the core's 4-wide build from binned SAH splits over all three
+//! axes with the triangles' rules ([`TRIANGLE_RULES`]), with leaf packs.
 //! Deterministic for any thread count.
 
 use super::*;
-use crate::bvh_core::build::{Bounds, BuildNode, BuildRules, BuildTree, Prim, PrimBounds, build};
-use crate::bvh_core::{LeafSink, PARALLEL_COLLAPSE_LEVELS, collapse};
+use crate::bvh_core::build::{Bounds, BuildRules, Prim, PrimBounds};
+use crate::bvh_core::{LeafSink, Wide, build_wide};
 
 /// Leaves are forced below this many triangles unless the centroids coincide.
 pub(super) const MAX_LEAF: usize = 8;
@@ -40,21 +40,20 @@ pub(super) fn triangle_prim(index: u32, corners: [Vec3; 3]) -> Prim {
     Prim::new(index, a.min(b).min(d), a.max(b).max(d))
 }
 
-/// Lays out leaf packs in depth-first leaf order during the collapse (the packs themselves are
+/// Lays out leaf packs in depth-first leaf order during the build (the packs themselves are
 /// filled afterwards, in parallel, from these descriptors).
-pub(super) struct Packer<'a> {
-    /// The primitives in their order after the build's partitioning.
-    pub(super) prims: &'a [Prim],
+pub(super) struct Packer {
     /// Per pack: first position in `prims` and number of triangles (1–4).
     pub(super) packs: Vec<(u32, u32)>,
     pub(super) leaves: usize,
 }
 
-impl Packer<'_> {
-    /// Packs the triangles `first..first + count` (positions in `prims`); returns the reference
-    /// to them: a leaf, or an extra node over up to four leaves when they need more than
-    /// [`MAX_LEAF_PACKS`] packs.
-    pub(super) fn leaf(&mut self, first: u32, count: u32, nodes: &mut Vec<Node4>) -> u32 {
+impl LeafSink for Packer {
+    /// Packs the triangles `prims`, at positions `first..` of the final order; returns the
+    /// reference to them: a leaf, or an extra node over up to four leaves when they need more
+    /// than [`MAX_LEAF_PACKS`] packs.
+    fn leaf(&mut self, first: u32, prims: &[Prim], nodes: &mut Vec<Node4>) -> u32 {
+        let count = prims.len() as u32;
         let n_packs = (count as usize).div_ceil(4);
         if n_packs <= MAX_LEAF_PACKS {
             let start = self.packs.len() as u32;
@@ -71,13 +70,21 @@ impl Packer<'_> {
         let mut node = Node4::EMPTY;
         for (k, s) in (first..first + count).step_by(part as usize).enumerate() {
             let c = part.min(first + count - s);
+            let part = &prims[(s - first) as usize..(s - first + c) as usize];
             let mut b = Bounds::EMPTY;
-            self.prims[s as usize..(s + c) as usize].iter().for_each(|p| b.grow(&p.bounds()));
-            let r = self.leaf(s, c, nodes);
+            part.iter().for_each(|p| b.grow(&p.bounds()));
+            let r = self.leaf(s, part, nodes);
             node.set(k, b.min, b.max, r);
         }
         nodes[idx] = node;
         idx as u32
+    }
+
+    fn append(&mut self, later: Self) -> u32 {
+        let offset = self.packs.len() as u32;
+        self.packs.extend(later.packs);
+        self.leaves += later.leaves;
+        offset
     }
 }
 
@@ -90,45 +97,35 @@ impl SceneBvh {
         let mut prims: Vec<Prim> =
             prepared.triangles.par_iter().enumerate().map(|(i, t)| triangle_prim(i as u32, prepared.triangle(*t))).collect();
 
-        let root = (!prims.is_empty()).then(|| {
+        let pack_capacity = prims.len() / 3;
+        let new_packer = || Packer { packs: Vec::with_capacity(pack_capacity), leaves: 0 };
+        let (nodes, Packer { packs: descs, leaves }) = if prims.is_empty() {
+            (Vec::new(), new_packer())
+        } else {
             let pb = PrimBounds::of(&prims);
-            build(&TRIANGLE_RULES, &mut prims, pb, 0, 0)
-        });
-
-        let new_packer = || Packer { prims: &prims, packs: Vec::with_capacity(prims.len() / 3), leaves: 0 };
-        let (nodes, packer) = match &root {
-            None => (Vec::new(), new_packer()),
-            Some(BuildNode::Leaf { bounds, first, count }) => {
+            match build_wide(&TRIANGLE_RULES, &mut prims, pb, &new_packer) {
                 // A single leaf: a root node with one child.
-                let (mut nodes, mut packer) = (vec![Node4::EMPTY], new_packer());
-                let r = packer.leaf(*first, *count, &mut nodes);
-                nodes[0].set(0, bounds.min, bounds.max, r);
-                (nodes, packer)
-            }
-            Some(inner) => {
-                let c = collapse(&BuildTree::NEW, inner, PARALLEL_COLLAPSE_LEVELS, &new_packer);
-                (c.nodes, c.sink)
+                Wide { nodes, root, sink } if root & LEAF != 0 => {
+                    let mut root_node = Node4::EMPTY;
+                    root_node.set(0, pb.bounds.min, pb.bounds.max, root);
+                    debug_assert!(nodes.is_empty(), "a leaf at the root is never oversized");
+                    (vec![root_node], sink)
+                }
+                Wide { nodes, sink, .. } => (nodes, sink),
             }
         };
-        let Packer { packs: descs, leaves, .. } = packer;
 
         // Per pack lane (slot), in parallel passes that each write their array once: the
         // triangle (`NO_TRI` in unused lanes) and its shadow transparency; then per pack the
-        // triangle data and the shadow bits. The binary tree is freed meanwhile, on the other
-        // thread (one free per inner node, serial otherwise).
-        let ((), slot_ref) = rayon::join(
-            move || drop(root),
-            || -> Vec<TriangleRef> {
-                (0..descs.len() * 4)
-                    .into_par_iter()
-                    .map(|slot| {
-                        let (first, n) = descs[slot / 4];
-                        let lane = (slot % 4) as u32;
-                        if lane < n { prepared.triangles[prims[(first + lane) as usize].index() as usize] } else { NO_TRI }
-                    })
-                    .collect()
-            },
-        );
+        // triangle data and the shadow bits.
+        let slot_ref: Vec<TriangleRef> = (0..descs.len() * 4)
+            .into_par_iter()
+            .map(|slot| {
+                let (first, n) = descs[slot / 4];
+                let lane = (slot % 4) as u32;
+                if lane < n { prepared.triangles[prims[(first + lane) as usize].index() as usize] } else { NO_TRI }
+            })
+            .collect();
         let triangles = prims.len();
         drop(prims);
         let slot_shadow: Vec<f32> =
@@ -155,20 +152,5 @@ impl SceneBvh {
             .map(|l| (0..4).fold(0u8, |bits, k| bits | u8::from(l[k] != 1.0) << k | u8::from(l[k] == 0.0) << (k + 4)))
             .collect();
         SceneBvh { nodes, packs, pack_shadow, slot_ref, slot_shadow, triangles, leaves }
-    }
-}
-
-impl<'a> LeafSink<&'a BuildNode> for Packer<'_> {
-    fn leaf(&mut self, r: &'a BuildNode, nodes: &mut Vec<Node4>) -> u32 {
-        match r {
-            BuildNode::Leaf { first, count, .. } => Packer::leaf(self, *first, *count, nodes),
-            BuildNode::Inner { .. } => unreachable!("the collapse hands over leaves only"),
-        }
-    }
-    fn append(&mut self, later: Self) -> u32 {
-        let offset = self.packs.len() as u32;
-        self.packs.extend(later.packs);
-        self.leaves += later.leaves;
-        offset
     }
 }

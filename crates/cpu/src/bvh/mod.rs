@@ -1,9 +1,9 @@
 //! `bvh`: the scene's triangle BVH for the trace stage (design §1, "PreparedScene … BVHs").
 //!
-//! Our own BVH rather than obvhs: a binned-SAH binary build (16 bins on all three axes; large
-//! nodes are binned in parallel, and the upper levels split in parallel with `rayon::join`),
-//! collapsed into a 4-wide BVH whose four child boxes are tested at once with 4-lane SIMD (glam
-//! `Vec4`), as Embree's BVH4 does. The node layout, leaf references and the ordered closest-hit
+//! Our own BVH rather than obvhs: 4-wide nodes built straight from binned-SAH binary splits
+//! (16 bins on all three axes; large nodes are binned in parallel, the halves of large nodes
+//! split in parallel with `rayon::join`, and the top levels' subtrees built in parallel), each
+//! node's four child boxes tested at once with 4-lane SIMD (glam `Vec4`), as Embree's BVH4 does. The node layout, leaf references and the ordered closest-hit
 //! walk are `bvh_core`'s, shared with the sphere BVH. Traversal is tuned for the two ray
 //! kinds of paper 1:
 //! - `closest_hit`: ordered traversal (hit children sorted by entry distance, nearest first);
@@ -29,8 +29,8 @@
 //! (`pack · 4 + lane`), so no indirection table sits between a hit and its triangle.
 //!
 //! The build is deterministic (same tree for any thread count): parallel binning merges exact
-//! min/max/count partials, and the parallel halves build into separate subtrees that are
-//! collapsed in a fixed depth-first order.
+//! min/max/count partials, and subtrees built in parallel are stitched in a fixed depth-first
+//! order.
 
 use glam::{Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
@@ -195,6 +195,7 @@ impl SceneBvh {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bvh_core::LeafSink;
     use crate::bvh_core::build::Prim;
     use glam::Vec2;
     use hybrid_scene::{Material, Mesh, Object, ObjectSource, Scene, Transform};
@@ -629,10 +630,10 @@ mod tests {
         let p = PreparedScene::new(&scene);
         let corners: Vec<[Vec3; 3]> = p.triangles.iter().map(|t| p.triangle(*t)).collect();
         let prims: Vec<Prim> = corners.iter().enumerate().map(|(i, c)| triangle_prim(i as u32, *c)).collect();
-        let mut packer = Packer { prims: &prims, packs: Vec::new(), leaves: 0 };
+        let mut packer = Packer { packs: Vec::new(), leaves: 0 };
         let mut nodes = Vec::new();
         // 150 triangles = 38 packs: one extra node over four leaves of ≤ 16 packs.
-        let r = packer.leaf(0, 150, &mut nodes);
+        let r = packer.leaf(0, &prims, &mut nodes);
         assert_eq!(r, 0);
         assert_eq!(nodes.len(), 1);
         assert_eq!(packer.leaves, 4);

@@ -1,13 +1,12 @@
-//! The binned SAH build both BVHs use: a binary tree over primitive boxes (16 bins on all three
-//! axes, or along the widest one; large nodes binned in parallel and the upper levels split in
-//! parallel with `rayon::join`), stopped where each BVH's [`BuildRules`] say. Deterministic for
-//! any thread count: parallel binning merges exact min/max/count partials, and the parallel
-//! halves build into separate subtrees.
+//! The binned SAH split both BVHs use ([`split_node`]): a node's primitives binned by centroid
+//! (16 bins on all three axes, or along the widest one; large nodes binned in parallel) and
+//! partitioned in place at the cheapest split, or left as a leaf where each BVH's
+//! [`BuildRules`] say. [`super::wide`] applies it from the root down, making 4-wide nodes.
+//! Deterministic for any thread count: parallel binning merges exact min/max/count partials.
 
 use glam::{Vec3A, Vec4};
 use rayon::prelude::*;
 
-use super::BinaryTree;
 use crate::isa;
 
 pub(crate) const BINS: usize = 16;
@@ -112,11 +111,6 @@ impl PrimBounds {
             serial(prims)
         }
     }
-}
-
-pub(crate) enum BuildNode {
-    Leaf { bounds: Bounds, first: u32, count: u32 },
-    Inner { bounds: Bounds, children: Box<(BuildNode, BuildNode)> },
 }
 
 /// A primitive during the build: its box, with its index (a triangle, a sphere) in the bits of `lo.w` (a
@@ -275,19 +269,19 @@ pub(crate) struct Split {
     pub(crate) cost: f32,
 }
 
-/// The subtree over `prims` (box and centroid box `pb`; they are positions `offset..` of the
-/// final order), partitioned in place.
-pub(crate) fn build(rules: &BuildRules, prims: &mut [Prim], pb: PrimBounds, offset: u32, depth: u32) -> BuildNode {
+/// Where the binary SAH build splits a node over `prims` (its box and centroid box `pb`, at
+/// binary depth `depth`): `None` for a leaf, else the left part's length and both parts' boxes,
+/// with `prims` partitioned in place (left part first).
+pub(crate) fn split_node(rules: &BuildRules, prims: &mut [Prim], pb: PrimBounds, depth: u32) -> Option<(usize, PrimBounds, PrimBounds)> {
     let PrimBounds { bounds, centroids: cb } = pb;
     let n = prims.len();
-    let leaf = BuildNode::Leaf { bounds, first: offset, count: n as u32 };
     let small = n <= rules.max_leaf;
     // A split costs at least one node test more than a leaf of one unit.
     if n <= 1
         || depth >= rules.leaf_at_depth
         || (small && (rules.small_is_leaf || rules.leaf_units(n) * rules.intersect_cost <= rules.traversal_cost))
     {
-        return leaf;
+        return None;
     }
     let nb = n.clamp(4, BINS);
     let split = if depth >= rules.halve_at_depth { None } else { best_split(rules, prims, &cb, &bounds, nb) };
@@ -298,22 +292,15 @@ pub(crate) fn build(rules: &BuildRules, prims: &mut [Prim], pb: PrimBounds, offs
             let (lo, sc) = (cb.min[axis], scale[axis]);
             partition(prims, |p| bin_of(p.lo[axis] + p.hi[axis], lo, sc, nb) <= bin)
         }
-        Some(_) => return leaf,
+        Some(_) => return None,
         None => (0, PrimBounds::EMPTY, PrimBounds::EMPTY),
     };
-    let (mid, lb, rb) = match parts {
-        (mid, lb, rb) if mid > 0 && mid < n => (mid, lb, rb),
+    match parts {
+        (mid, lb, rb) if mid > 0 && mid < n => Some((mid, lb, rb)),
         // All centroids equal, binning could not separate them, or too deep: any split is as good.
-        _ if !small => (n / 2, PrimBounds::of(&prims[..n / 2]), PrimBounds::of(&prims[n / 2..])),
-        _ => return leaf,
-    };
-    let (l, r) = prims.split_at_mut(mid);
-    let (a, b) = if n >= PARALLEL_MIN {
-        rayon::join(|| build(rules, l, lb, offset, depth + 1), || build(rules, r, rb, offset + mid as u32, depth + 1))
-    } else {
-        (build(rules, l, lb, offset, depth + 1), build(rules, r, rb, offset + mid as u32, depth + 1))
-    };
-    BuildNode::Inner { bounds, children: Box::new((a, b)) }
+        _ if !small => Some((n / 2, PrimBounds::of(&prims[..n / 2]), PrimBounds::of(&prims[n / 2..]))),
+        _ => None,
+    }
 }
 
 /// Binned SAH with `nb ≤ BINS` bins over all three axes at once, or the widest one (one pass
@@ -395,33 +382,6 @@ fn partition_with(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> (usize, PrimB
         }
     }
     (i, lb, rb)
-}
-
-pub(crate) fn bounds_of(n: &BuildNode) -> &Bounds {
-    match n {
-        BuildNode::Leaf { bounds, .. } | BuildNode::Inner { bounds, .. } => bounds,
-    }
-}
-
-/// The binary build tree, for [`super::collapse`] (its nodes are their own references).
-pub(crate) struct BuildTree<'a>(std::marker::PhantomData<&'a BuildNode>);
-
-impl BuildTree<'_> {
-    pub(crate) const NEW: Self = BuildTree(std::marker::PhantomData);
-}
-
-impl<'a> BinaryTree for BuildTree<'a> {
-    type Ref = &'a BuildNode;
-    fn children(&self, r: &'a BuildNode) -> Option<[&'a BuildNode; 2]> {
-        match r {
-            BuildNode::Leaf { .. } => None,
-            BuildNode::Inner { children, .. } => Some([&children.0, &children.1]),
-        }
-    }
-    fn bounds(&self, r: &'a BuildNode) -> (Vec3A, Vec3A) {
-        let b = bounds_of(r);
-        (b.min, b.max)
-    }
 }
 
 #[cfg(test)]

@@ -1,13 +1,13 @@
-//! The sphere BVH's build: the core's binned SAH ([`crate::bvh_core::build`]) over the spheres'
-//! boxes with the spheres' rules ([`SPHERE_RULES`]), then the core's collapse into 4-wide nodes
-//! (the top two levels in parallel).
+//! The sphere BVH's build: the core's 4-wide build from binned SAH splits
+//! ([`crate::bvh_core::build_wide`]) over the spheres' boxes with the spheres' rules
+//! ([`SPHERE_RULES`]).
 
 use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::*;
-use crate::bvh_core::build::{BuildNode, BuildRules, BuildTree, Prim, PrimBounds, build};
-use crate::bvh_core::{LeafSink, PARALLEL_COLLAPSE_LEVELS, collapse};
+use crate::bvh_core::build::{BuildRules, Prim, PrimBounds};
+use crate::bvh_core::{LeafSink, build_wide};
 
 /// The sphere BVH's SAH: leaves of at most [`LEAF_MAX`] spheres (tested four at a time), bins
 /// along the widest axis only, and past depth 64 (pathological distributions) halving by count,
@@ -26,12 +26,9 @@ pub(super) const SPHERE_RULES: BuildRules = BuildRules {
 /// The spheres' leaves become leaf references to their slots (in leaf order).
 struct SphereLeaves;
 
-impl<'a> LeafSink<&'a BuildNode> for SphereLeaves {
-    fn leaf(&mut self, r: &'a BuildNode, _: &mut Vec<Node4>) -> u32 {
-        match r {
-            BuildNode::Leaf { first, count, .. } => leaf_ref(*first, *count),
-            BuildNode::Inner { .. } => unreachable!("the collapse hands over leaves only"),
-        }
+impl LeafSink for SphereLeaves {
+    fn leaf(&mut self, first: u32, prims: &[Prim], _: &mut Vec<Node4>) -> u32 {
+        leaf_ref(first, prims.len() as u32)
     }
     fn append(&mut self, _: Self) -> u32 {
         0
@@ -60,21 +57,17 @@ impl SphereBvh {
             })
             .collect();
         // A node's box is its centres' box grown by `r` (x ↦ x ± r rounds monotonically).
-        let (nodes, root, root_min, root_max, tree) = if prims.is_empty() {
-            (Vec::new(), LEAF, Vec3::ZERO, Vec3::ZERO, None)
+        let (nodes, root, root_min, root_max) = if prims.is_empty() {
+            (Vec::new(), LEAF, Vec3::ZERO, Vec3::ZERO)
         } else {
             let pb = PrimBounds::of(&prims);
-            let tree = build(&SPHERE_RULES, &mut prims, pb, 0, 0);
-            let c = collapse(&BuildTree::NEW, &tree, PARALLEL_COLLAPSE_LEVELS, &|| SphereLeaves);
-            (c.nodes, c.root, Vec3::from(pb.bounds.min), Vec3::from(pb.bounds.max), Some(tree))
+            let c = build_wide(&SPHERE_RULES, &mut prims, pb, &|| SphereLeaves);
+            (c.nodes, c.root, Vec3::from(pb.bounds.min), Vec3::from(pb.bounds.max))
         };
         let axis = |a: usize| {
             prims.par_iter().map(|p| centers[p.index() as usize][a]).chain(rayon::iter::repeat_n(0.0, LEAF_MAX - 1)).collect::<Vec<f32>>()
         };
-        // The binary tree is freed (one free per inner node, serial otherwise) on one thread
-        // while the others gather the centres in leaf order.
-        let ((), (xs, ys, zs, indices)) =
-            rayon::join(move || drop(tree), || (axis(0), axis(1), axis(2), prims.par_iter().map(Prim::index).collect()));
+        let (xs, ys, zs, indices) = (axis(0), axis(1), axis(2), prims.par_iter().map(Prim::index).collect());
         Ok(Self { radius, xs, ys, zs, indices, nodes, root, root_min, root_max })
     }
 }
