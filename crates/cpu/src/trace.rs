@@ -33,10 +33,10 @@
 //! leaves from (so refraction rays entering glass start inside it). Pixels are independent, so
 //! the output is bit-identical for any thread count.
 //!
-//! Work items of up to [`STREAM`] pixels (sized by the frame) trace their rays in ray streams (`SceneBvh`'s
-//! `closest_hits_stream` and `any_hit_attenuation_stream`): first each light's shadow rays and
-//! the first reflection and refraction rays, then each pixel is finished in order with those
-//! answers (the rays below the first ones one at a time).
+//! Work items of up to [`STREAM`] pixels (sized by the frame) trace their rays in ray streams
+//! (`SceneBvh`'s `closest_hits_stream` and `any_hit_attenuation_stream`): first each light's
+//! shadow rays and the first reflection and refraction rays, then each pixel is finished in
+//! order with those answers (the rays below the first ones one at a time).
 
 use glam::{Vec2, Vec3};
 use hybrid_core::blend::combine;

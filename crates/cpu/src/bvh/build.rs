@@ -43,7 +43,8 @@ pub(super) fn triangle_prim(index: u32, corners: [Vec3; 3]) -> Prim {
 /// Lays out leaf packs in depth-first leaf order during the build (the packs themselves are
 /// filled afterwards, in parallel, from these descriptors).
 pub(super) struct Packer {
-    /// Per pack: first position in `prims` and number of triangles (1–4).
+    /// Per pack: first position in the build's final primitive order and number of triangles
+    /// (1–4).
     pub(super) packs: Vec<(u32, u32)>,
     pub(super) leaves: usize,
 }
@@ -64,16 +65,14 @@ impl LeafSink for Packer {
             return leaf_ref(start, n_packs as u32 - 1);
         }
         // Triangles per part: a multiple of 4, at most four parts.
-        let part = (n_packs.div_ceil(4) * 4) as u32;
+        let part = n_packs.div_ceil(4) * 4;
         let idx = nodes.len();
         nodes.push(Node4::EMPTY);
         let mut node = Node4::EMPTY;
-        for (k, s) in (first..first + count).step_by(part as usize).enumerate() {
-            let c = part.min(first + count - s);
-            let part = &prims[(s - first) as usize..(s - first + c) as usize];
+        for (k, run) in prims.chunks(part).enumerate() {
             let mut b = Bounds::EMPTY;
-            part.iter().for_each(|p| b.grow(&p.bounds()));
-            let r = self.leaf(s, part, nodes);
+            run.iter().for_each(|p| b.grow(&p.bounds()));
+            let r = self.leaf(first + (k * part) as u32, run, nodes);
             node.set(k, b.min, b.max, r);
         }
         nodes[idx] = node;

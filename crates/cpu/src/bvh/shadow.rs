@@ -33,8 +33,16 @@ impl SceneBvh {
         if self.cache_blocks(cache, &r, t_max) {
             return 0.0;
         }
+        self.attenuation_traversed(prepared, &r, t_max, cache).max(0.0)
+    }
+
+    /// The traversal half of [`any_hit_attenuation_cached`](Self::any_hit_attenuation_cached)
+    /// (the cache's own leaf already tested): listing 8b's attenuation along `r` (≤ 0 when
+    /// blocked), with `cache` moved onto the opaque blocker found, or emptied when none is.
+    #[inline(always)]
+    pub(super) fn attenuation_traversed(&self, prepared: &PreparedScene, r: &RayPre, t_max: f32, cache: &mut ShadowCache) -> f32 {
         let mut att = 1.0f32;
-        self.for_each_pack_hit_with(&r, 0.0, t_max, |leaf, slot0, mask, u, v| {
+        self.for_each_pack_hit_with(r, 0.0, t_max, |leaf, slot0, mask, u, v| {
             self.attenuate(prepared, &mut att, cache, leaf, slot0, mask, u, v)
         });
         if att > 0.0 {
@@ -42,7 +50,7 @@ impl SceneBvh {
             // testing this blocker first would only cost time.
             cache.leaf = EMPTY_SLOT;
         }
-        att.max(0.0)
+        att
     }
 
     /// Whether an opaque triangle of the cache's leaf blocks the segment `0 < t < t_max`.

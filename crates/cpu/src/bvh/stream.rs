@@ -130,20 +130,6 @@ thread_local! {
     static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::new());
 }
 
-/// Runs `f` on each stream of `rays` (at most [`STREAM`] of them) and its part of `out`, with
-/// this thread's scratch, compiled for the instruction set in use.
-#[inline(always)]
-fn in_streams<R, O>(rays: &[R], out: &mut [O], mut f: impl FnMut(&mut Scratch, &[R], &mut [O])) {
-    with_scratch(|scratch| {
-        for (rays, out) in rays.chunks(STREAM).zip(out.chunks_mut(STREAM)) {
-            isa::dispatch(
-                #[inline(always)]
-                || f(scratch, rays, out),
-            );
-        }
-    });
-}
-
 /// Runs `f` with this thread's scratch (a fresh one if it is in use further up the stack).
 fn with_scratch<R>(f: impl FnOnce(&mut Scratch) -> R) -> R {
     SCRATCH.with(|cell| match cell.try_borrow_mut() {
@@ -169,6 +155,26 @@ impl Scratch {
 }
 
 impl SceneBvh {
+    /// One answer per ray of `rays`, each `fill` to start with (and to the end in a BVH
+    /// without triangles): `f` runs on each stream of `rays` (at most [`STREAM`] of them) and
+    /// its part of the answers, with this thread's scratch, compiled for the instruction set in
+    /// use.
+    #[inline(always)]
+    fn in_streams<R, O: Clone>(&self, rays: &[R], fill: O, mut f: impl FnMut(&mut Scratch, &[R], &mut [O])) -> Vec<O> {
+        let mut out = vec![fill; rays.len()];
+        if !self.nodes.is_empty() {
+            with_scratch(|scratch| {
+                for (rays, out) in rays.chunks(STREAM).zip(out.chunks_mut(STREAM)) {
+                    isa::dispatch(
+                        #[inline(always)]
+                        || f(scratch, rays, out),
+                    );
+                }
+            });
+        }
+        out
+    }
+
     /// The closest triangle hit of each ray `(origin, dir)` with `t_min < t < t_max`, in the
     /// order of `rays`, each as [`closest_hit`](Self::closest_hit) would answer it (but for
     /// rays through shared edges, see the module notes).
@@ -176,17 +182,12 @@ impl SceneBvh {
     /// a frame's reflection or bounce rays, at the cost of a list write per ray and child box
     /// entered.
     pub fn closest_hits_stream(&self, rays: &[(Vec3, Vec3)], t_min: f32, t_max: f32) -> Vec<Option<Hit>> {
-        let mut out = vec![None; rays.len()];
-        if self.nodes.is_empty() {
-            return out;
-        }
-        in_streams(
+        self.in_streams(
             rays,
-            &mut out,
+            None,
             #[inline(always)]
             |scratch, rays, out| self.stream_with(scratch, rays, t_min, t_max, out),
-        );
-        out
+        )
     }
 
     /// Listing 8b for each ray `(origin, dir, t_max)`, as
@@ -207,17 +208,12 @@ impl SceneBvh {
         rays: &[(Vec3, Vec3, f32)],
         mut cache: Option<&mut ShadowCache>,
     ) -> Vec<f32> {
-        let mut out = vec![1.0; rays.len()];
-        if self.nodes.is_empty() {
-            return out;
-        }
-        in_streams(
+        self.in_streams(
             rays,
-            &mut out,
+            1.0,
             #[inline(always)]
             |scratch, rays, out| self.shadow_stream_with(scratch, prepared, rays, cache.as_deref_mut(), out),
-        );
-        out
+        )
     }
 
     #[inline(always)]
@@ -260,16 +256,8 @@ impl SceneBvh {
                 n += 1;
                 lit_run = Some(run + 1);
             } else {
-                let a = &mut att[id];
-                self.for_each_pack_hit_from(&r, 0.0, t_max[id], 0, |leaf, slot0, mask, u, v| {
-                    self.attenuate(prepared, a, cache, leaf, slot0, mask, u, v)
-                });
-                if *a > 0.0 {
-                    *cache = ShadowCache::default();
-                    lit_run = Some(0);
-                } else {
-                    lit_run = None;
-                }
+                att[id] = self.attenuation_traversed(prepared, &r, t_max[id], cache);
+                lit_run = (att[id] > 0.0).then_some(0);
             }
         }
         self.shadow_stream_walk(s, prepared, n, out);

@@ -1,7 +1,7 @@
 //! The 4-wide BVH core that both of the CPU backend's BVHs are made of: the triangle BVH of the
 //! trace stage ([`crate::bvh`]) and the sphere BVH of the point-cloud capsule
-//! ([`crate::spheres`]). One node layout, one leaf reference, one build of 4-wide nodes from binned SAH
-//! splits, and one ordered closest-hit traversal, generic over the two things that
+//! ([`crate::spheres`]). One node layout, one leaf reference, one build of 4-wide nodes from
+//! binned SAH splits, and one ordered closest-hit traversal, generic over the two things that
 //! differ: how a ray tests a node's four boxes ([`NodeTest`]: the triangles' exact slabs, the
 //! spheres' padded ones) and what a leaf holds (a closure: packs of four triangles, or up to
 //! four spheres), so a change to any of these lands in both.
