@@ -3,9 +3,9 @@
 //! Our own BVH rather than obvhs: 4-wide nodes built straight from binned-SAH binary splits
 //! (16 bins on all three axes; large nodes are binned in parallel, the halves of large nodes
 //! split in parallel with `rayon::join`, and the top levels' subtrees built in parallel), each
-//! node's four child boxes tested at once with 4-lane SIMD (glam `Vec4`), as Embree's BVH4 does. The node layout, leaf references and the ordered closest-hit
-//! walk are `bvh_core`'s, shared with the sphere BVH. Traversal is tuned for the two ray
-//! kinds of paper 1:
+//! node's four child boxes tested at once with 4-lane SIMD (glam `Vec4`), as Embree's BVH4
+//! does. The node layout, leaf references and the ordered closest-hit walk are `bvh_core`'s,
+//! shared with the sphere BVH. Traversal is tuned for the two ray kinds of paper 1:
 //! - `closest_hit`: ordered traversal (hit children sorted by entry distance, nearest first);
 //!   stacked entries farther than the closest hit so far are skipped; the hit is the least
 //!   `(t, pack slot)` pair, so it does not depend on the order leaves are visited in;
@@ -270,6 +270,28 @@ mod tests {
         (o, (target - o).normalize())
     }
 
+    /// The frame of a 4×4 fan of rays: a random eye, the unit direction from it to a random
+    /// point near the soup's middle, and that direction's right and up axes.
+    fn fan_frame(rng: &mut StdRng) -> (Vec3, Vec3, Vec3, Vec3) {
+        let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0));
+        let centre = (Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0)) - eye).normalize();
+        let (right, up) = centre.any_orthonormal_pair();
+        (eye, centre, right, up)
+    }
+
+    /// Ray `k` of a set with awkward directions: a random ray, but every 11th with a zero
+    /// component and every 13th along an axis (infinite inverses).
+    fn awkward_ray(rng: &mut StdRng, k: usize) -> (Vec3, Vec3) {
+        let (o, mut d) = random_ray(rng);
+        if k.is_multiple_of(11) {
+            d[k % 3] = 0.0;
+        }
+        if k.is_multiple_of(13) {
+            d = [Vec3::X, Vec3::NEG_Y, Vec3::Z][k % 3];
+        }
+        (o, d)
+    }
+
     #[test]
     fn closest_hit_equals_brute_force() {
         let scene = soup_scene(3000, 7, vec![Material::default()]);
@@ -386,24 +408,14 @@ mod tests {
         // axes (infinite inverses): more than one stream's worth, so the input is cut.
         let mut rays = Vec::new();
         for _ in 0..200 {
-            let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0));
-            let centre =
-                (Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0)) - eye).normalize();
-            let (right, up) = centre.any_orthonormal_pair();
+            let (eye, centre, right, up) = fan_frame(&mut rng);
             for j in 0..16 {
                 let (x, y) = ((j % 4) as f32 - 1.5, (j / 4) as f32 - 1.5);
                 rays.push((eye, (centre + (right * x + up * y) * 0.02).normalize()));
             }
         }
         for k in 0..3000 {
-            let (o, mut d) = random_ray(&mut rng);
-            if k % 11 == 0 {
-                d[k % 3] = 0.0;
-            }
-            if k % 13 == 0 {
-                d = [Vec3::X, Vec3::NEG_Y, Vec3::Z][k % 3];
-            }
-            rays.push((o, d));
+            rays.push(awkward_ray(&mut rng, k));
         }
         assert!(rays.len() > STREAM);
         let mut hits = 0;
@@ -434,10 +446,7 @@ mod tests {
         // octant), with and without a segment end, some unnormalised.
         let mut rays = Vec::new();
         for k in 0..300 {
-            let eye = Vec3::new(rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0), rng.random_range(-9.0..9.0));
-            let centre =
-                (Vec3::new(rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0)) - eye).normalize();
-            let (right, up) = centre.any_orthonormal_pair();
+            let (eye, centre, right, up) = fan_frame(&mut rng);
             let spread = if k % 5 == 0 { 0.3 } else { 0.01 };
             let t_max = if k % 3 == 0 { rng.random_range(2.0..20.0) } else { f32::INFINITY };
             for j in 0..16 {
@@ -452,13 +461,7 @@ mod tests {
         // in packets of every length.
         let mut rays = Vec::new();
         for k in 0..2000 {
-            let (o, mut d) = random_ray(&mut rng);
-            if k % 11 == 0 {
-                d[k % 3] = 0.0;
-            }
-            if k % 13 == 0 {
-                d = [Vec3::X, Vec3::NEG_Y, Vec3::Z][k % 3];
-            }
+            let (o, d) = awkward_ray(&mut rng, k);
             rays.push((o, d, if k % 2 == 0 { f32::INFINITY } else { rng.random_range(1.0..15.0) }));
         }
         let mut incoherent = 0;
