@@ -548,15 +548,14 @@ mod tests {
         assert!(multi > 50, "too few rays through several blockers: {multi}");
     }
 
+    /// Materials for shadow tests: opaque, half-transparent and non-casting triangles mixed.
+    fn shadow_mix() -> Vec<Material> {
+        vec![Material::default(), Material { opacity: 0.5, ..Default::default() }, Material { casts_shadows: false, ..Default::default() }]
+    }
+
     #[test]
     fn shadow_cache_never_changes_the_attenuation() {
-        // Opaque, half-transparent and textured-opacity-free non-casting triangles mixed.
-        let mats = vec![
-            Material::default(),
-            Material { opacity: 0.5, ..Default::default() },
-            Material { casts_shadows: false, ..Default::default() },
-        ];
-        let scene = soup_scene(3000, 7, mats);
+        let scene = soup_scene(3000, 7, shadow_mix());
         let p = PreparedScene::new(&scene);
         let bvh = SceneBvh::build(&p);
         let other_scene = soup_scene(50, 8, vec![Material::default()]);
@@ -588,14 +587,9 @@ mod tests {
 
     #[test]
     fn shadow_streams_attenuate_as_single_rays_do() {
-        // Opaque, half-transparent and non-casting triangles mixed; bundles of nearby rays (as
-        // a light's shadow rays) and single ones, more than one stream's worth.
-        let mats = vec![
-            Material::default(),
-            Material { opacity: 0.5, ..Default::default() },
-            Material { casts_shadows: false, ..Default::default() },
-        ];
-        let scene = soup_scene(3000, 13, mats);
+        // Bundles of nearby rays (as a light's shadow rays) and single ones, more than one
+        // stream's worth.
+        let scene = soup_scene(3000, 13, shadow_mix());
         let p = PreparedScene::new(&scene);
         let bvh = SceneBvh::build(&p);
         let mut rng = StdRng::seed_from_u64(17);
