@@ -1,13 +1,63 @@
 //! The CPU kernels' instruction-set paths (`hybrid_cpu::isa`, forced with `HYBRID_ISA`) give the
-//! same frames bit for bit: every scene of `scenes/` in the hybrid and rt-only modes (and the
-//! tree's capsule both ways) is rendered with every path this machine has, and the PNG and every
-//! `--dump` file (G-buffer, ids, masks, packed capsule frame, EXR depths) must equal the
-//! baseline path's byte for byte. Each render also reports the path it ran (`cpu_isa`).
+//! same frames: every scene of `scenes/` in the hybrid and rt-only modes (and the tree's capsule
+//! both ways) is rendered with every path this machine has, and the PNG and every `--dump` file
+//! (G-buffer, ids, masks, packed capsule frame, EXR depths) must equal the baseline path's byte
+//! for byte, with one stated tolerance: the AVX2 and AVX-512 paths' ray streams test boxes with
+//! fused multiply–subtracts (`hybrid_cpu::bvh`, `stream.rs`), so a ray that grazes a box
+//! boundary may find another hit there, and the images the trace stage's rays make (and the
+//! frame) may differ in at most [`GRAZING_PIXELS_PER_MILLE`] per mille of their pixels, the
+//! report's ray counts by as many rays. (None do in these renders today; pavilion's rt-only
+//! frame at 1280×720 has one such pixel.) Each render also reports the path it ran (`cpu_isa`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use hybrid_cpu::isa::Isa;
+
+/// The outputs that secondary rays make: where a ray grazes a box boundary, their pixels may
+/// differ between paths (see the module notes); every other output must be equal byte for byte.
+const TRACED: [&str; 10] = [
+    "frame.png",
+    "final.png",
+    "lighting.png",
+    "lighting.exr",
+    "shadow.png",
+    "shadow.exr",
+    "reflection.png",
+    "reflection.exr",
+    "refraction.png",
+    "refraction.exr",
+];
+
+/// Most pixels of a traced image (per mille, at least one) that may differ between paths.
+const GRAZING_PIXELS_PER_MILLE: usize = 1;
+
+/// A decoded image's pixels, each as the bits of all its channels.
+fn pixels(name: &str, bytes: &[u8]) -> Vec<Vec<u32>> {
+    if name.ends_with(".png") {
+        let img = image::load_from_memory(bytes).unwrap_or_else(|e| panic!("{name}: {e}")).to_rgba16();
+        img.pixels().map(|p| p.0.iter().map(|&c| u32::from(c)).collect()).collect()
+    } else {
+        use exr::prelude::*;
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(std::io::Cursor::new(bytes))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let channels: Vec<Vec<f32>> = image.layer_data.channel_data.list.iter().map(|c| c.sample_data.values_as_f32().collect()).collect();
+        (0..channels[0].len()).map(|i| channels.iter().map(|c| c[i].to_bits()).collect()).collect()
+    }
+}
+
+/// How many pixels of the traced image `name` differ between `a` and `b` (same size).
+fn differing_pixels(name: &str, a: &[u8], b: &[u8]) -> (usize, usize) {
+    let (a, b) = (pixels(name, a), pixels(name, b));
+    assert_eq!(a.len(), b.len(), "{name}: sizes differ");
+    (a.iter().zip(&b).filter(|(p, q)| p != q).count(), a.len())
+}
 
 fn hybrid(isa: Option<&str>, args: &[&str]) -> Output {
     let mut c = Command::new(env!("CARGO_BIN_EXE_hybrid"));
@@ -37,8 +87,8 @@ fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
 }
 
 /// Renders `scene` at 160×90 with `extra` flags on `isa`: the output files (image, report
-/// without its timings, dump) and the report's `cpu_isa`.
-fn render(isa: &str, scene: &Path, extra: &[&str]) -> (Vec<(String, Vec<u8>)>, String) {
+/// without its timings and ray counts, dump), the report's `cpu_isa` and its ray counts.
+fn render(isa: &str, scene: &Path, extra: &[&str]) -> (Vec<(String, Vec<u8>)>, String, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
     let (out, report, dump) = (dir.path().join("frame.png"), dir.path().join("report.json"), dir.path().join("dump"));
     let mut args = vec!["render", scene.to_str().unwrap(), "--backend", "cpu", "--size", "160x90", "--quiet", "--threads", "2"];
@@ -52,18 +102,18 @@ fn render(isa: &str, scene: &Path, extra: &[&str]) -> (Vec<(String, Vec<u8>)>, S
     // The report's ray counts and heuristic choices must agree too; its timings cannot.
     let mut json_same = json.clone();
     let map = json_same.as_object_mut().unwrap();
-    for key in ["timings_ms", "cpu_isa", "capsule"] {
+    for key in ["timings_ms", "cpu_isa", "capsule", "rays"] {
         map.remove(key);
     }
     if let Some(h) = map.get_mut("heuristic").and_then(|h| h.as_object_mut()) {
         h.retain(|k, _| !k.contains("ms"));
     }
-    got.push(("report (no timings)".into(), serde_json::to_vec(&json_same).unwrap()));
-    (got, json["cpu_isa"].as_str().unwrap_or_default().to_string())
+    got.push(("report (no timings, no ray counts)".into(), serde_json::to_vec(&json_same).unwrap()));
+    (got, json["cpu_isa"].as_str().unwrap_or_default().to_string(), json["rays"].clone())
 }
 
 #[test]
-fn every_isa_path_renders_every_scene_bit_for_bit() {
+fn every_isa_path_renders_every_scene_alike() {
     let paths = Isa::available();
     eprintln!("paths on this machine: {:?}", paths.iter().map(|i| i.name()).collect::<Vec<_>>());
     let mut cases: Vec<(PathBuf, Vec<&str>)> = Vec::new();
@@ -81,15 +131,35 @@ fn every_isa_path_renders_every_scene_bit_for_bit() {
     }
     assert!(cases.len() >= 12, "expected the six scenes of scenes/");
     for (scene, extra) in &cases {
-        let (base, base_isa) = render(Isa::Baseline.name(), scene, extra);
+        let (base, base_isa, base_rays) = render(Isa::Baseline.name(), scene, extra);
         assert_eq!(base_isa, Isa::Baseline.name());
         for isa in &paths[1..] {
-            let (got, got_isa) = render(isa.name(), scene, extra);
+            let (got, got_isa, got_rays) = render(isa.name(), scene, extra);
+            let case = format!("{} {extra:?}, {} against {}", scene.display(), isa.name(), Isa::Baseline.name());
             assert_eq!(got_isa, isa.name(), "the report names the path");
             assert_eq!(got.len(), base.len());
+            let mut grazing = 0;
             for ((name, a), (name_b, b)) in base.iter().zip(&got) {
                 assert_eq!(name, name_b);
-                assert!(a == b, "{} {extra:?}: `{name}` differs between {} and {}", scene.display(), Isa::Baseline.name(), isa.name());
+                if a == b {
+                    continue;
+                }
+                assert!(TRACED.contains(&name.as_str()), "{case}: `{name}` differs");
+                let (differ, of) = differing_pixels(name, a, b);
+                assert!(differ <= (of * GRAZING_PIXELS_PER_MILLE / 1000).max(1), "{case}: `{name}` differs in {differ} of {of} pixels");
+                grazing = grazing.max(differ);
+            }
+            // Each grazing ray may change which rays follow it, one or two per pixel.
+            let counts = |r: &serde_json::Value| -> Vec<(String, i64)> {
+                let mut v: Vec<_> = r.as_object().into_iter().flatten().map(|(k, n)| (k.clone(), n.as_i64().unwrap())).collect();
+                v.sort();
+                v
+            };
+            let (base_counts, got_counts) = (counts(&base_rays), counts(&got_rays));
+            assert_eq!(base_counts.len(), got_counts.len(), "{case}: ray kinds");
+            for ((kind, a), (kind_b, b)) in base_counts.iter().zip(&got_counts) {
+                assert_eq!(kind, kind_b);
+                assert!((a - b).unsigned_abs() as usize <= 2 * grazing, "{case}: {kind} rays {a} against {b}");
             }
         }
     }

@@ -15,8 +15,13 @@
 //! code). The kernels are the same Rust on every path: the wider paths only encode it with more
 //! registers and three-operand (VEX/EVEX) instructions, and auto-vectorise loops wider. Rust
 //! never fuses `a * b + c` into an FMA by itself and no kernel calls `mul_add`, so every path
-//! gives the same bits (tested by rendering on every path this machine has,
-//! `crates/cli/tests/isa.rs`, and by the BVH tests in this crate).
+//! gives the same bits, with one exception chosen for speed: on the AVX2 and AVX-512 paths the
+//! triangle BVH's ray streams test boxes with fused multiply–subtracts (`fma_token`, `bvh`'s
+//! `stream.rs`; 8–15% faster closest-hit streams), which can change the hit of a ray that
+//! grazes a box boundary. Tested by rendering on every path this machine has
+//! (`crates/cli/tests/isa.rs`: byte-identical outputs, but for at most one pixel in a thousand
+//! of the images the trace stage's rays make; none differ in its renders) and by the BVH
+//! tests in this crate.
 //!
 //! On aarch64 the baseline already has NEON, the only path there (`neon`); other targets run
 //! their baseline (`portable`).
@@ -168,6 +173,18 @@ pub fn dispatch<R>(f: impl FnOnce() -> R) -> R {
         },
         #[cfg(not(target_arch = "x86_64"))]
         Isa::Avx2 | Isa::Avx512 => f(),
+    }
+}
+
+/// The AVX2 + FMA token when the path in use is AVX2 or AVX-512 (both have the FMA unit), for
+/// kernels that choose fused multiply–adds on those paths (the ray streams' box tests); `None` on
+/// the baseline.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+pub(crate) fn fma_token() -> Option<pulp::x86::V3> {
+    match active() {
+        Isa::Baseline => None,
+        Isa::Avx2 | Isa::Avx512 => pulp::x86::V3::try_new(),
     }
 }
 

@@ -378,6 +378,32 @@ mod tests {
         }
     }
 
+    /// Rays in the plane where coordinate `axis` is 0 (the origin's and the direction's
+    /// component exactly 0, so the inverse is infinite and origin × inverse is not a number),
+    /// each aimed at a point inside a triangle that straddles that plane.
+    fn in_plane_rays(p: &PreparedScene, rng: &mut StdRng) -> Vec<(Vec3, Vec3)> {
+        let mut rays = Vec::new();
+        for (k, &t) in p.triangles.iter().enumerate() {
+            let axis = k % 3;
+            let v = p.triangle(t);
+            // The two edge points on the plane, where the corners lie on both sides of it.
+            let crossings: Vec<Vec3> = [(0, 1), (1, 2), (2, 0)]
+                .into_iter()
+                .filter(|&(i, j)| (v[i][axis] < 0.0) != (v[j][axis] < 0.0))
+                .map(|(i, j)| v[i] + (v[j] - v[i]) * (v[i][axis] / (v[i][axis] - v[j][axis])))
+                .collect();
+            if crossings.len() != 2 {
+                continue;
+            }
+            let mut target = (crossings[0] + crossings[1]) * 0.5;
+            let mut o = target + Vec3::new(rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0));
+            target[axis] = 0.0;
+            o[axis] = 0.0;
+            rays.push((o, (target - o).normalize()));
+        }
+        rays
+    }
+
     fn hit_bits(h: Option<Hit>) -> Option<(u32, TriangleRef, [u32; 3])> {
         h.map(|h| (h.t.to_bits(), h.triangle, h.bary.to_array().map(f32::to_bits)))
     }
@@ -417,6 +443,12 @@ mod tests {
         for k in 0..3000 {
             rays.push(awkward_ray(&mut rng, k));
         }
+        // Rays whose box tests cannot be fused (the AVX2 and AVX-512 paths test their boxes
+        // the exact way): without that, they would miss everything.
+        let in_plane = in_plane_rays(&p, &mut rng);
+        let in_plane_hits = bvh.closest_hits_stream(&in_plane, 0.0, f32::INFINITY).iter().flatten().count();
+        assert!(in_plane_hits > 100, "too few in-plane rays hit to test anything: {in_plane_hits} of {}", in_plane.len());
+        rays.extend(in_plane);
         assert!(rays.len() > STREAM);
         let mut hits = 0;
         for (t_min, t_max) in [(0.0, f32::INFINITY), (0.5, 12.0)] {
@@ -601,6 +633,11 @@ mod tests {
                 rays.push((o + Vec3::splat(j as f32 * 1e-3), d, t_max));
             }
         }
+        // Rays whose box tests cannot be fused (see `streams_answer_as_single_rays_do`).
+        let in_plane: Vec<_> = in_plane_rays(&p, &mut rng).into_iter().map(|(o, d)| (o, d, 30.0)).collect();
+        let in_plane_blocked = bvh.any_hit_attenuation_stream(&p, &in_plane, None).iter().filter(|&&a| a < 1.0).count();
+        assert!(in_plane_blocked > 100, "too few in-plane rays blocked: {in_plane_blocked} of {}", in_plane.len());
+        rays.extend(in_plane);
         assert!(rays.len() > STREAM);
         let single: Vec<f32> = rays.iter().map(|&(o, d, t)| bvh.any_hit_attenuation(&p, o, d, t)).collect();
         let (mut blocked, mut partial) = (0, 0);
