@@ -17,7 +17,7 @@
 //! never fuses `a * b + c` into an FMA by itself and no kernel calls `mul_add`, so every path
 //! gives the same bits, with one exception chosen for speed: on the AVX2 and AVX-512 paths the
 //! triangle BVH's ray streams test boxes with fused multiply–subtracts (`fma_token`, `bvh`'s
-//! `stream.rs`; 8–15% faster closest-hit streams), which can change the hit of a ray that
+//! `stream.rs`; 6–11% faster closest-hit streams), which can change the hit of a ray that
 //! grazes a box boundary. Tested by rendering on every path this machine has
 //! (`crates/cli/tests/isa.rs`: byte-identical outputs, but for at most one pixel in a thousand
 //! of the images the trace stage's rays make; none differ in its renders) and by the BVH
