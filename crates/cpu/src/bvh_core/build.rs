@@ -365,23 +365,33 @@ pub(crate) fn partition(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> (usize,
     )
 }
 
+/// Hoare's two-sided partition: from the front, the elements that stay; from the back, those that
+/// stay there; then the two misplaced elements found swap. Each element is tested once and only
+/// misplaced pairs move (a one-sided loop that swaps every element going right with the last one
+/// built the same trees 3–5% slower).
 #[inline(always)]
 fn partition_with(v: &mut [Prim], pred: impl Fn(&Prim) -> bool) -> (usize, PrimBounds, PrimBounds) {
     let (mut lb, mut rb) = (PrimBounds::EMPTY, PrimBounds::EMPTY);
-    let mut i = 0;
-    let mut j = v.len();
-    while i < j {
-        let p = v[i];
-        if pred(&p) {
-            lb.add(&p);
+    let (mut i, mut j) = (0, v.len());
+    loop {
+        while i < j && pred(&v[i]) {
+            lb.add(&v[i]);
             i += 1;
-        } else {
-            rb.add(&p);
-            j -= 1;
-            v.swap(i, j);
         }
+        while i < j && !pred(&v[j - 1]) {
+            j -= 1;
+            rb.add(&v[j]);
+        }
+        if i == j {
+            return (i, lb, rb);
+        }
+        // `v[i]` goes right and `v[j - 1]` left.
+        j -= 1;
+        v.swap(i, j);
+        lb.add(&v[i]);
+        rb.add(&v[j]);
+        i += 1;
     }
-    (i, lb, rb)
 }
 
 #[cfg(test)]
