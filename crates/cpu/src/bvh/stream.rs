@@ -165,7 +165,7 @@ impl BoxTest for Fused {
     #[inline(always)]
     fn hits(self, r: &NodeRay, n: &Node4, t_min: f32, t_max: f32) -> (Vec4, u32) {
         if !r.fusable {
-            return r.hits(n, t_min, t_max);
+            return Exact.hits(r, n, t_min, t_max);
         }
         let fma = self.0.fma;
         let mut near = Vec4::splat(t_min);
@@ -531,7 +531,7 @@ mod tests {
         for k in 0..200_000 {
             let s = [0.01, 1.0, 100.0, 1e4][k % 4];
             let n = random_node(&mut rng, s);
-            let o =
+            let mut o =
                 Vec3::new(rng.random_range(-2.0 * s..2.0 * s), rng.random_range(-2.0 * s..2.0 * s), rng.random_range(-2.0 * s..2.0 * s));
             // Aimed near a box's centre, so that most rays enter some box and some graze one.
             let (lo, hi) = n.child_box(k % 4);
@@ -545,7 +545,6 @@ mod tests {
                 1 => d[k % 3] = 1e-30,
                 _ => {}
             }
-            let mut o = o;
             if k % 19 == 0 {
                 o.x = n.planes[0][0];
             }
@@ -561,13 +560,11 @@ mod tests {
             // product o · inv, the fused operation's result, and the exact test's two.
             let eps = 4.0 * f32::EPSILON;
             let slack = |t: f32| eps * (r.o_inv.iter().map(|v| v.abs()).fold(0.0, f32::max) + t.abs());
-            let (_, exact_far) = {
-                let mut far = Vec4::splat(t_max);
-                for axis in 0..3 {
-                    far = far.min((n.planes[r.far[axis] as usize] - Vec4::splat(r.o[axis])) * Vec4::splat(r.inv[axis]));
-                }
-                (exact_near, far)
-            };
+            // The exact test's exit distances (it returns only the entries).
+            let mut exact_far = Vec4::splat(t_max);
+            for axis in 0..3 {
+                exact_far = exact_far.min((n.planes[r.far[axis] as usize] - Vec4::splat(r.o[axis])) * Vec4::splat(r.inv[axis]));
+            }
             for lane in 0..4 {
                 let (a, b) = (exact_near[lane], near[lane]);
                 if exact_mask >> lane & 1 != 0 && mask >> lane & 1 != 0 {
