@@ -541,7 +541,7 @@ fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mu
         t,
         y_lo..y_hi,
         #[inline(always)]
-        |y, [mut e0, mut e1, mut e2], step| {
+        |y, [e0, e1, e2], step| {
             // The row's pixels in the band's buffers: `row..=end`, `len` of them.
             let base = (y - y_lo) as usize * w;
             let (row, end, len) = (base + xa, base + xb, xb + 1 - xa);
@@ -567,8 +567,8 @@ fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mu
             }
             // Short rows: a fixed count of pixels (4 or 8) from the row's first, so no loop exit to
             // mispredict (rows of one triangle have one length, so the choice is predicted). The
-            // pixels past the row are never covered; at the image's right edge the row goes pixel
-            // by pixel.
+            // pixels past the row are never covered; where 8 pixels would pass the image's right
+            // edge, the row goes pixel by pixel.
             if len <= 4 && xa + 4 <= w {
                 fixed_row::<4>(&mut depth[row..row + 4], &mut ids[row..row + 4], [e0, e1, e2], step, [z0, dzdx, zy], id);
                 return;
@@ -577,42 +577,35 @@ fn depth_test(t: &RasterTri, id: u32, y_lo: u32, y_hi: u32, w: usize, depth: &mu
                 fixed_row::<8>(&mut depth[row..row + 8], &mut ids[row..row + 8], [e0, e1, e2], step, [z0, dzdx, zy], id);
                 return;
             }
-            for (k, (d, o)) in depth[row..=end].iter_mut().zip(&mut ids[row..=end]).enumerate() {
-                let z = (z0 + dzdx * k as f32 + zy).min(1.0);
-                let win = ((e0 | e1 | e2) >= 0) & (z > *d);
-                *d = if win { z } else { *d };
-                *o = if win { id } else { *o };
-                e0 += step[0];
-                e1 += step[1];
-                e2 += step[2];
-            }
+            row_test(&mut depth[row..=end], &mut ids[row..=end], [e0, e1, e2], step, [z0, dzdx, zy], id);
         },
     );
 }
 
-/// The depth test of a row of at most `N` pixels, done for exactly `N` pixels from the row's
-/// first (`d`, `o`): the same test, in the same order, as the pixel-by-pixel loop. The pixels
-/// past the row lie outside the triangle's box of covered pixel centres, so their edge values
-/// are never all ≥ 0: they keep their values.
+/// The depth test of a row's pixels `d`, `o` (edge values `e` at the first, changing by `step`
+/// per pixel; depth `z0 + dzdx·k + zy` at pixel k): covered pixels where the depth is Greater
+/// take it and `id`.
 #[inline(always)]
-fn fixed_row<const N: usize>(
-    d: &mut [f32],
-    o: &mut [u32],
-    [mut e0, mut e1, mut e2]: [i64; 3],
-    step: [i64; 3],
-    [z0, dzdx, zy]: [f32; 3],
-    id: u32,
-) {
-    let (d, o): (&mut [f32; N], &mut [u32; N]) = (d.try_into().expect("N depths"), o.try_into().expect("N ids"));
-    for k in 0..N {
+fn row_test(d: &mut [f32], o: &mut [u32], [mut e0, mut e1, mut e2]: [i64; 3], step: [i64; 3], [z0, dzdx, zy]: [f32; 3], id: u32) {
+    for (k, (d, o)) in d.iter_mut().zip(o).enumerate() {
         let z = (z0 + dzdx * k as f32 + zy).min(1.0);
-        let win = ((e0 | e1 | e2) >= 0) & (z > d[k]);
-        d[k] = if win { z } else { d[k] };
-        o[k] = if win { id } else { o[k] };
+        let win = ((e0 | e1 | e2) >= 0) & (z > *d);
+        *d = if win { z } else { *d };
+        *o = if win { id } else { *o };
         e0 += step[0];
         e1 += step[1];
         e2 += step[2];
     }
+}
+
+/// [`row_test`] of a row of at most `N` pixels, done for exactly `N` pixels from the row's first
+/// (`d`, `o`), a count known at compile time. The pixels past the row lie outside the
+/// triangle's box of covered pixel centres, so their edge values are never all ≥ 0: they keep
+/// their values.
+#[inline(always)]
+fn fixed_row<const N: usize>(d: &mut [f32], o: &mut [u32], e: [i64; 3], step: [i64; 3], z: [f32; 3], id: u32) {
+    let (d, o): (&mut [f32; N], &mut [u32; N]) = (d.try_into().expect("N depths"), o.try_into().expect("N ids"));
+    row_test(d, o, e, step, z, id);
 }
 
 /// Rows of at least this many pixels are walked over their covered span only; shorter ones test
