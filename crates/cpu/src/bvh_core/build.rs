@@ -215,6 +215,14 @@ impl Bins {
         }
     }
 
+    /// [`Bins::add`] on `axis` only (`lo`, `scale`: that axis's).
+    #[inline(always)]
+    fn add_on_axis(&mut self, p: &Prim, lo: f32, scale: f32, nb: usize, axis: usize) {
+        let b = bin_of(p.lo[axis] + p.hi[axis], lo, scale, nb);
+        self.bounds[axis][b].grow(&p.bounds());
+        self.counts[axis][b] += 1;
+    }
+
     #[inline(always)]
     pub(crate) fn add(&mut self, p: &Prim, lo: Vec3A, scale: Vec3A, nb: usize) {
         let b = bins_of(p.centroid2(), lo, scale, nb);
@@ -252,13 +260,7 @@ pub(crate) fn bin_prims_into(out: &mut Bins, prims: &[Prim], lo: Vec3A, scale: V
             (None, n) if n < BIN_TWO_WAY_MIN => prims.iter().for_each(|p| out.add(p, lo, scale, nb)),
             (None, n) if n < BIN_FOUR_WAY_MIN => out.merge_from(&bin_interleaved::<2>(prims, lo, scale, nb), nb, None),
             (None, _) => out.merge_from(&bin_interleaved::<4>(prims, lo, scale, nb), nb, None),
-            (Some(a), n) if n < BIN_TWO_WAY_MIN => {
-                for p in prims {
-                    let b = bin_of(p.lo[a] + p.hi[a], lo[a], scale[a], nb);
-                    out.bounds[a][b].grow(&p.bounds());
-                    out.counts[a][b] += 1;
-                }
-            }
+            (Some(a), n) if n < BIN_TWO_WAY_MIN => prims.iter().for_each(|p| out.add_on_axis(p, lo[a], scale[a], nb, a)),
             (Some(a), _) => out.merge_from(&bin_one_axis(prims, lo[a], scale[a], nb, a), nb, Some(a)),
         },
     )
@@ -269,10 +271,7 @@ pub(crate) fn bin_prims_into(out: &mut Bins, prims: &[Prim], lo: Vec3A, scale: V
 fn bin_one_axis(prims: &[Prim], lo: f32, scale: f32, nb: usize, axis: usize) -> Bins {
     let mut sets = [Bins::EMPTY; 2];
     for (k, p) in prims.iter().enumerate() {
-        let set = &mut sets[k & 1];
-        let b = bin_of(p.lo[axis] + p.hi[axis], lo, scale, nb);
-        set.bounds[axis][b].grow(&p.bounds());
-        set.counts[axis][b] += 1;
+        sets[k & 1].add_on_axis(p, lo, scale, nb, axis);
     }
     let [a, b] = sets;
     a.merge(b)
