@@ -183,12 +183,7 @@ pub(crate) struct Bins {
 impl Bins {
     pub(crate) const EMPTY: Self = Self { bounds: [[Bounds::EMPTY; BINS]; 3], counts: [[0; BINS]; 3] };
     pub(crate) fn merge(mut self, o: Self) -> Self {
-        for axis in 0..3 {
-            for b in 0..BINS {
-                self.bounds[axis][b].grow(&o.bounds[axis][b]);
-                self.counts[axis][b] += o.counts[axis][b];
-            }
-        }
+        self.merge_from(&o, BINS, None);
         self
     }
 }
@@ -204,7 +199,8 @@ impl Bins {
         }
     }
 
-    /// [`Bins::merge`] of bins `0..nb` of the axes binned, in place.
+    /// Grows bins `0..nb` of the axes binned (`axis`, or all three) by `o`'s, in place (exact
+    /// min/max/count, so the order of merges does not matter).
     #[inline(always)]
     fn merge_from(&mut self, o: &Bins, nb: usize, axis: Option<usize>) {
         for a in axis.map_or(0..3, |a| a..a + 1) {
